@@ -1,0 +1,2 @@
+//! The `hands` command-line interface.
+fn main() {}
