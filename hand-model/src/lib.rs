@@ -7,3 +7,10 @@
 //! of the palm near the wrist, +y toward the fingertips, palm facing −z; camera frame: OpenCV).
 
 pub mod shape;
+pub mod error;
+pub mod kinematics;
+pub mod math;
+
+pub use error::{ModelError, Result};
+pub mod keypoints;
+pub mod spheremesh;
