@@ -6,11 +6,12 @@
 //! Units are millimetres and radians; frames follow `DESIGN.md` (model frame: origin at the back
 //! of the palm near the wrist, +y toward the fingertips, palm facing −z; camera frame: OpenCV).
 
-pub mod shape;
 pub mod error;
 pub mod kinematics;
 pub mod math;
+pub mod shape;
 
 pub use error::{ModelError, Result};
 pub mod keypoints;
 pub mod spheremesh;
+pub mod testing;

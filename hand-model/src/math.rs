@@ -88,7 +88,8 @@ impl Rigid3 {
 
     /// Whether every entry is finite.
     pub fn is_finite(&self) -> bool {
-        self.rotation.iter().all(|x| x.is_finite()) && self.translation.iter().all(|x| x.is_finite())
+        self.rotation.iter().all(|x| x.is_finite())
+            && self.translation.iter().all(|x| x.is_finite())
     }
 
     /// Re-orthonormalize the rotation (polar projection), for rotations read from text files.
@@ -162,7 +163,10 @@ mod tests {
 
     #[test]
     fn rigid_inverse_composes_to_identity() {
-        let t = Rigid3::new(euler_xyz_to_matrix(0.4, -1.0, 2.0), Vector3::new(1.0, -2.0, 3.0));
+        let t = Rigid3::new(
+            euler_xyz_to_matrix(0.4, -1.0, 2.0),
+            Vector3::new(1.0, -2.0, 3.0),
+        );
         let id = t.compose(&t.inverse());
         assert!((id.rotation - Matrix3::identity()).norm() < 1e-12);
         assert!(id.translation.norm() < 1e-12);

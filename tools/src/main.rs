@@ -1,2 +1,27 @@
-//! The `hands` command-line interface.
-fn main() {}
+//! The `hands` command-line interface (DESIGN.md "CLI surface").
+
+mod model;
+
+use clap::{Parser, Subcommand};
+
+/// Real-time generative hand tracking and hand-model personalization from a depth camera.
+#[derive(Parser)]
+#[command(name = "hands", version, about, long_about = None)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// Inspect and export hand templates.
+    #[command(subcommand)]
+    Model(model::ModelCommand),
+}
+
+fn main() -> anyhow::Result<()> {
+    let cli = Cli::parse();
+    match cli.command {
+        Command::Model(cmd) => model::run(cmd),
+    }
+}

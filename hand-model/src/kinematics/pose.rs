@@ -45,10 +45,12 @@ impl Pose {
 
     /// Set a DOF by name; unknown names are an error.
     pub fn set(&mut self, skeleton: &Skeleton, name: &str, value: f64) -> Result<()> {
-        let i = skeleton.dof_index(name).ok_or_else(|| ModelError::InvalidArgument {
-            name: "pose",
-            reason: format!("unknown DOF `{name}`"),
-        })?;
+        let i = skeleton
+            .dof_index(name)
+            .ok_or_else(|| ModelError::InvalidArgument {
+                name: "pose",
+                reason: format!("unknown DOF `{name}`"),
+            })?;
         if !value.is_finite() {
             return Err(ModelError::InvalidArgument {
                 name: "pose",

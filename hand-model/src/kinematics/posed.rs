@@ -120,15 +120,30 @@ impl PosedSkeleton {
 
     /// The full 3×n skeleton Jacobian `∂p/∂θ` of a world point rigidly attached to `bone`, written
     /// column by column into `out` (length n; columns of DOFs outside the chain are zero).
-    pub fn point_jacobian(&self, skeleton: &Skeleton, bone: usize, p: &Vector3<f64>, out: &mut [Vector3<f64>]) {
-        assert_eq!(out.len(), skeleton.num_dofs(), "output has the wrong number of columns");
+    pub fn point_jacobian(
+        &self,
+        skeleton: &Skeleton,
+        bone: usize,
+        p: &Vector3<f64>,
+        out: &mut [Vector3<f64>],
+    ) {
+        assert_eq!(
+            out.len(),
+            skeleton.num_dofs(),
+            "output has the wrong number of columns"
+        );
         out.iter_mut().for_each(|c| *c = Vector3::zeros());
         self.for_each_column(skeleton, bone, p, |d, c| out[d] = c);
     }
 
     /// `∂p/∂t̄_b`: how a world point attached to `bone` moves when the rest translation of bone
     /// `b` changes (in b's parent frame); zero when `b` is not on the point's chain.
-    pub fn rest_translation_jacobian(&self, skeleton: &Skeleton, b: usize, bone: usize) -> Matrix3<f64> {
+    pub fn rest_translation_jacobian(
+        &self,
+        skeleton: &Skeleton,
+        b: usize,
+        bone: usize,
+    ) -> Matrix3<f64> {
         if !skeleton.is_ancestor_or_self(b, bone) {
             return Matrix3::zeros();
         }

@@ -178,10 +178,20 @@ fn validate(bones: &[Bone], dofs: &[Dof], src: &Path) -> Result<()> {
         }
         match b.parent {
             None if i != 0 => {
-                return Err(ModelError::field(src, "bones.parent", Some(i), "only bone 0 may be the root"))
+                return Err(ModelError::field(
+                    src,
+                    "bones.parent",
+                    Some(i),
+                    "only bone 0 may be the root",
+                ))
             }
             Some(_) if i == 0 => {
-                return Err(ModelError::field(src, "bones.parent", Some(0), "bone 0 must be the root"))
+                return Err(ModelError::field(
+                    src,
+                    "bones.parent",
+                    Some(0),
+                    "bone 0 must be the root",
+                ))
             }
             Some(p) if p >= i => {
                 return Err(ModelError::field(
@@ -194,11 +204,23 @@ fn validate(bones: &[Bone], dofs: &[Dof], src: &Path) -> Result<()> {
             _ => {}
         }
         if !b.rest.is_finite() {
-            return Err(ModelError::field(src, "bones.rest", Some(i), "non-finite rest frame"));
+            return Err(ModelError::field(
+                src,
+                "bones.rest",
+                Some(i),
+                "non-finite rest frame",
+            ));
         }
         let r = &b.rest.rotation;
-        if (r.transpose() * r - nalgebra::Matrix3::identity()).norm() > 1e-4 || r.determinant() < 0.0 {
-            return Err(ModelError::field(src, "bones.rest", Some(i), "rest rotation is not a rotation"));
+        if (r.transpose() * r - nalgebra::Matrix3::identity()).norm() > 1e-4
+            || r.determinant() < 0.0
+        {
+            return Err(ModelError::field(
+                src,
+                "bones.rest",
+                Some(i),
+                "rest rotation is not a rotation",
+            ));
         }
         for &d in &b.dofs {
             if dofs.get(d).map(|dof| dof.bone) != Some(i) {
@@ -214,25 +236,55 @@ fn validate(bones: &[Bone], dofs: &[Dof], src: &Path) -> Result<()> {
     let mut globals = Vec::new();
     for (i, d) in dofs.iter().enumerate() {
         if d.name.is_empty() || dofs[..i].iter().any(|o| o.name == d.name) {
-            return Err(ModelError::field(src, "dofs.name", Some(i), format!("empty or duplicate name `{}`", d.name)));
+            return Err(ModelError::field(
+                src,
+                "dofs.name",
+                Some(i),
+                format!("empty or duplicate name `{}`", d.name),
+            ));
         }
         if d.bone >= bones.len() {
-            return Err(ModelError::field(src, "dofs.bone", Some(i), format!("bone index {} out of range", d.bone)));
+            return Err(ModelError::field(
+                src,
+                "dofs.bone",
+                Some(i),
+                format!("bone index {} out of range", d.bone),
+            ));
         }
         if !bones[d.bone].dofs.contains(&i) {
-            return Err(ModelError::field(src, "dofs.bone", Some(i), "DOF is not listed by its bone"));
+            return Err(ModelError::field(
+                src,
+                "dofs.bone",
+                Some(i),
+                "DOF is not listed by its bone",
+            ));
         }
         if !d.axis.iter().all(|x| x.is_finite()) || (d.axis.norm() - 1.0).abs() > 1e-6 {
-            return Err(ModelError::field(src, "dofs.axis", Some(i), "axis must be a finite unit vector"));
+            return Err(ModelError::field(
+                src,
+                "dofs.axis",
+                Some(i),
+                "axis must be a finite unit vector",
+            ));
         }
         if let Some([lo, hi]) = d.limits {
             if !(lo.is_finite() && hi.is_finite() && lo <= hi) {
-                return Err(ModelError::field(src, "dofs.limits", Some(i), format!("invalid limits [{lo}, {hi}]")));
+                return Err(ModelError::field(
+                    src,
+                    "dofs.limits",
+                    Some(i),
+                    format!("invalid limits [{lo}, {hi}]"),
+                ));
             }
         }
         if d.kind != DofKind::Rotation {
             if d.bone != 0 {
-                return Err(ModelError::field(src, "dofs.kind", Some(i), "global DOFs must sit on the root bone"));
+                return Err(ModelError::field(
+                    src,
+                    "dofs.kind",
+                    Some(i),
+                    "global DOFs must sit on the root bone",
+                ));
             }
             globals.push((d.kind, d.axis));
         }
@@ -245,7 +297,11 @@ fn validate(bones: &[Bone], dofs: &[Dof], src: &Path) -> Result<()> {
         (DofKind::GlobalRotation, Vector3::y()),
         (DofKind::GlobalRotation, Vector3::z()),
     ];
-    let root_dofs: Vec<_> = bones[0].dofs.iter().map(|&d| (dofs[d].kind, dofs[d].axis)).collect();
+    let root_dofs: Vec<_> = bones[0]
+        .dofs
+        .iter()
+        .map(|&d| (dofs[d].kind, dofs[d].axis))
+        .collect();
     if !globals.is_empty() && root_dofs.as_slice() != expected.as_slice() {
         return Err(ModelError::field(
             src,

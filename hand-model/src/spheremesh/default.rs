@@ -43,10 +43,46 @@ struct Finger {
 }
 
 const FINGERS: [Finger; 4] = [
-    Finger { name: "index", base: [-27.0, 57.0, 3.0], splay: 0.08, lengths: [42.0, 24.0, 14.0], radii: [9.8, 8.6, 7.2, 6.3], abd_limits: [-0.30, 0.35], membrane: [-2.0, 16.8, 3.0], membrane_radius: 2.5 },
-    Finger { name: "middle", base: [-8.0, 60.0, 4.0], splay: 0.0, lengths: [46.0, 28.0, 16.0], radii: [9.8, 8.7, 7.3, 6.4], abd_limits: [-0.30, 0.40], membrane: [1.0, 20.7, 3.0], membrane_radius: 3.5 },
-    Finger { name: "ring", base: [10.0, 57.0, 3.0], splay: -0.06, lengths: [43.0, 27.0, 15.0], radii: [9.2, 8.2, 6.9, 6.0], abd_limits: [-0.20, 0.30], membrane: [1.0, 21.9, 3.0], membrane_radius: 3.0 },
-    Finger { name: "pinky", base: [26.0, 50.0, 1.0], splay: -0.15, lengths: [34.0, 20.0, 14.0], radii: [8.4, 7.2, 6.2, 5.5], abd_limits: [-0.35, 0.50], membrane: [-1.5, 19.7, 2.5], membrane_radius: 2.0 },
+    Finger {
+        name: "index",
+        base: [-27.0, 57.0, 3.0],
+        splay: 0.08,
+        lengths: [42.0, 24.0, 14.0],
+        radii: [9.8, 8.6, 7.2, 6.3],
+        abd_limits: [-0.30, 0.35],
+        membrane: [-2.0, 16.8, 3.0],
+        membrane_radius: 2.5,
+    },
+    Finger {
+        name: "middle",
+        base: [-8.0, 60.0, 4.0],
+        splay: 0.0,
+        lengths: [46.0, 28.0, 16.0],
+        radii: [9.8, 8.7, 7.3, 6.4],
+        abd_limits: [-0.30, 0.40],
+        membrane: [1.0, 20.7, 3.0],
+        membrane_radius: 3.5,
+    },
+    Finger {
+        name: "ring",
+        base: [10.0, 57.0, 3.0],
+        splay: -0.06,
+        lengths: [43.0, 27.0, 15.0],
+        radii: [9.2, 8.2, 6.9, 6.0],
+        abd_limits: [-0.20, 0.30],
+        membrane: [1.0, 21.9, 3.0],
+        membrane_radius: 3.0,
+    },
+    Finger {
+        name: "pinky",
+        base: [26.0, 50.0, 1.0],
+        splay: -0.15,
+        lengths: [34.0, 20.0, 14.0],
+        radii: [8.4, 7.2, 6.2, 5.5],
+        abd_limits: [-0.35, 0.50],
+        membrane: [-1.5, 19.7, 2.5],
+        membrane_radius: 2.0,
+    },
 ];
 
 struct Build {
@@ -63,13 +99,31 @@ impl Build {
             Some(p) => self.globals[p].compose(&rest),
             None => rest,
         };
-        self.bones.push(Bone { name: name.into(), parent, rest, dofs: vec![] });
+        self.bones.push(Bone {
+            name: name.into(),
+            parent,
+            rest,
+            dofs: vec![],
+        });
         self.globals.push(g);
         self.bones.len() - 1
     }
 
-    fn dof(&mut self, name: &str, bone: usize, kind: DofKind, axis: Vector3<f64>, limits: Option<[f64; 2]>) -> usize {
-        self.dofs.push(Dof { name: name.into(), bone, kind, axis, limits });
+    fn dof(
+        &mut self,
+        name: &str,
+        bone: usize,
+        kind: DofKind,
+        axis: Vector3<f64>,
+        limits: Option<[f64; 2]>,
+    ) -> usize {
+        self.dofs.push(Dof {
+            name: name.into(),
+            bone,
+            kind,
+            axis,
+            limits,
+        });
         self.dofs.len() - 1
     }
 
@@ -79,12 +133,24 @@ impl Build {
     }
 
     fn sphere_at(&mut self, name: &str, bone: usize, model: [f64; 3], radius: f64) -> usize {
-        let offset = self.globals[bone].inverse().transform_point(&Vector3::from(model));
+        let offset = self.globals[bone]
+            .inverse()
+            .transform_point(&Vector3::from(model));
         self.sphere_local(name, bone, offset, radius)
     }
 
-    fn sphere_local(&mut self, name: &str, bone: usize, offset: Vector3<f64>, radius: f64) -> usize {
-        self.spheres.push(SphereDef { name: name.into(), attachment: Attachment::Bone { bone, offset }, radius });
+    fn sphere_local(
+        &mut self,
+        name: &str,
+        bone: usize,
+        offset: Vector3<f64>,
+        radius: f64,
+    ) -> usize {
+        self.spheres.push(SphereDef {
+            name: name.into(),
+            attachment: Attachment::Bone { bone, offset },
+            radius,
+        });
         self.spheres.len() - 1
     }
 }
@@ -103,21 +169,50 @@ pub fn default_right_hand() -> SphereMeshTemplate {
 }
 
 fn build() -> Result<SphereMeshTemplate> {
-    let mut b = Build { bones: vec![], dofs: vec![], spheres: vec![], globals: vec![] };
+    let mut b = Build {
+        bones: vec![],
+        dofs: vec![],
+        spheres: vec![],
+        globals: vec![],
+    };
     let root = b.bone("root", None, Rigid3::identity());
     let mut root_dofs = vec![];
-    for (name, axis) in [("global_tx", Vector3::x()), ("global_ty", Vector3::y()), ("global_tz", Vector3::z())] {
+    for (name, axis) in [
+        ("global_tx", Vector3::x()),
+        ("global_ty", Vector3::y()),
+        ("global_tz", Vector3::z()),
+    ] {
         root_dofs.push(b.dof(name, root, DofKind::Translation, axis, None));
     }
-    for (name, axis) in [("global_rx", Vector3::x()), ("global_ry", Vector3::y()), ("global_rz", Vector3::z())] {
+    for (name, axis) in [
+        ("global_rx", Vector3::x()),
+        ("global_ry", Vector3::y()),
+        ("global_rz", Vector3::z()),
+    ] {
         root_dofs.push(b.dof(name, root, DofKind::GlobalRotation, axis, None));
     }
     b.apply_order(root, &root_dofs);
     let palm = b.bone("palm", Some(root), Rigid3::identity());
     let finger_frame = Matrix3::from_columns(&[-Vector3::x(), Vector3::y(), -Vector3::z()]);
-    let wrist = b.bone("wrist", Some(palm), Rigid3::new(finger_frame, Vector3::new(0.0, -10.0, 0.0)));
-    let w_abd = b.dof("wrist_abd", wrist, DofKind::Rotation, -Vector3::z(), Some([-1.0, 0.2]));
-    let w_flex = b.dof("wrist_flex", wrist, DofKind::Rotation, Vector3::x(), Some([-1.0, 1.6]));
+    let wrist = b.bone(
+        "wrist",
+        Some(palm),
+        Rigid3::new(finger_frame, Vector3::new(0.0, -10.0, 0.0)),
+    );
+    let w_abd = b.dof(
+        "wrist_abd",
+        wrist,
+        DofKind::Rotation,
+        -Vector3::z(),
+        Some([-1.0, 0.2]),
+    );
+    let w_flex = b.dof(
+        "wrist_flex",
+        wrist,
+        DofKind::Rotation,
+        Vector3::x(),
+        Some([-1.0, 1.6]),
+    );
     b.apply_order(wrist, &[w_flex, w_abd]);
 
     // Thumb: CMC on the radial side near the wrist, metacarpal pointing out, up and palmward.
@@ -132,12 +227,44 @@ fn build() -> Result<SphereMeshTemplate> {
     let thumb_cmc = Vector3::new(-22.0, 6.0, -4.0);
     let (t1_len, t2_len, t_top) = (44.0, 32.0, 17.0);
     let t1 = b.bone("thumb_1", Some(palm), Rigid3::new(t_rot, thumb_cmc));
-    let t2 = b.bone("thumb_2", Some(t1), Rigid3::from_translation(Vector3::new(0.0, t1_len, 0.0)));
-    let t3 = b.bone("thumb_3", Some(t2), Rigid3::from_translation(Vector3::new(0.0, t2_len, 0.0)));
-    let d_abd = b.dof("thumb_cmc_abd", t1, DofKind::Rotation, t_abd_local, Some([-0.5, 0.8]));
-    let d_f1 = b.dof("thumb_cmc_flex", t1, DofKind::Rotation, Vector3::x(), Some([-0.6, 1.0]));
-    let d_f2 = b.dof("thumb_mcp_flex", t2, DofKind::Rotation, Vector3::x(), Some([-0.3, 1.0]));
-    let d_f3 = b.dof("thumb_ip_flex", t3, DofKind::Rotation, Vector3::x(), Some([-0.3, 1.4]));
+    let t2 = b.bone(
+        "thumb_2",
+        Some(t1),
+        Rigid3::from_translation(Vector3::new(0.0, t1_len, 0.0)),
+    );
+    let t3 = b.bone(
+        "thumb_3",
+        Some(t2),
+        Rigid3::from_translation(Vector3::new(0.0, t2_len, 0.0)),
+    );
+    let d_abd = b.dof(
+        "thumb_cmc_abd",
+        t1,
+        DofKind::Rotation,
+        t_abd_local,
+        Some([-0.5, 0.8]),
+    );
+    let d_f1 = b.dof(
+        "thumb_cmc_flex",
+        t1,
+        DofKind::Rotation,
+        Vector3::x(),
+        Some([-0.6, 1.0]),
+    );
+    let d_f2 = b.dof(
+        "thumb_mcp_flex",
+        t2,
+        DofKind::Rotation,
+        Vector3::x(),
+        Some([-0.3, 1.0]),
+    );
+    let d_f3 = b.dof(
+        "thumb_ip_flex",
+        t3,
+        DofKind::Rotation,
+        Vector3::x(),
+        Some([-0.3, 1.4]),
+    );
     b.apply_order(t1, &[d_f1, d_abd]);
     b.apply_order(t2, &[d_f2]);
     b.apply_order(t3, &[d_f3]);
@@ -145,13 +272,49 @@ fn build() -> Result<SphereMeshTemplate> {
     let mut digit_bones = vec![(t1, t2, t3)];
     for f in &FINGERS {
         let rot = axis_angle(&Vector3::z(), f.splay) * finger_frame;
-        let b1 = b.bone(&format!("{}_1", f.name), Some(palm), Rigid3::new(rot, Vector3::from(f.base)));
-        let b2 = b.bone(&format!("{}_2", f.name), Some(b1), Rigid3::from_translation(Vector3::new(0.0, f.lengths[0], 0.0)));
-        let b3 = b.bone(&format!("{}_3", f.name), Some(b2), Rigid3::from_translation(Vector3::new(0.0, f.lengths[1], 0.0)));
-        let abd = b.dof(&format!("{}_mcp_abd", f.name), b1, DofKind::Rotation, -Vector3::z(), Some(f.abd_limits));
-        let f1 = b.dof(&format!("{}_mcp_flex", f.name), b1, DofKind::Rotation, Vector3::x(), Some([-0.5, 1.6]));
-        let f2 = b.dof(&format!("{}_pip_flex", f.name), b2, DofKind::Rotation, Vector3::x(), Some([-0.1, 1.9]));
-        let f3 = b.dof(&format!("{}_dip_flex", f.name), b3, DofKind::Rotation, Vector3::x(), Some([-0.2, 1.5]));
+        let b1 = b.bone(
+            &format!("{}_1", f.name),
+            Some(palm),
+            Rigid3::new(rot, Vector3::from(f.base)),
+        );
+        let b2 = b.bone(
+            &format!("{}_2", f.name),
+            Some(b1),
+            Rigid3::from_translation(Vector3::new(0.0, f.lengths[0], 0.0)),
+        );
+        let b3 = b.bone(
+            &format!("{}_3", f.name),
+            Some(b2),
+            Rigid3::from_translation(Vector3::new(0.0, f.lengths[1], 0.0)),
+        );
+        let abd = b.dof(
+            &format!("{}_mcp_abd", f.name),
+            b1,
+            DofKind::Rotation,
+            -Vector3::z(),
+            Some(f.abd_limits),
+        );
+        let f1 = b.dof(
+            &format!("{}_mcp_flex", f.name),
+            b1,
+            DofKind::Rotation,
+            Vector3::x(),
+            Some([-0.5, 1.6]),
+        );
+        let f2 = b.dof(
+            &format!("{}_pip_flex", f.name),
+            b2,
+            DofKind::Rotation,
+            Vector3::x(),
+            Some([-0.1, 1.9]),
+        );
+        let f3 = b.dof(
+            &format!("{}_dip_flex", f.name),
+            b3,
+            DofKind::Rotation,
+            Vector3::x(),
+            Some([-0.2, 1.5]),
+        );
         b.apply_order(b1, &[f1, abd]);
         b.apply_order(b2, &[f2]);
         b.apply_order(b3, &[f3]);
@@ -163,10 +326,30 @@ fn build() -> Result<SphereMeshTemplate> {
     let mut tips = [0usize; 5];
     for (fi, f) in FINGERS.iter().enumerate().rev() {
         let (b1, b2, b3) = digit_bones[fi + 1];
-        tips[fi + 1] = b.sphere_local(&format!("{}_top", f.name), b3, Vector3::new(0.0, f.lengths[2], 0.0), f.radii[3]);
-        b.sphere_local(&format!("{}_middle", f.name), b3, Vector3::zeros(), f.radii[2]);
-        b.sphere_local(&format!("{}_bottom", f.name), b2, Vector3::zeros(), f.radii[1]);
-        b.sphere_local(&format!("{}_base", f.name), b1, Vector3::zeros(), f.radii[0]);
+        tips[fi + 1] = b.sphere_local(
+            &format!("{}_top", f.name),
+            b3,
+            Vector3::new(0.0, f.lengths[2], 0.0),
+            f.radii[3],
+        );
+        b.sphere_local(
+            &format!("{}_middle", f.name),
+            b3,
+            Vector3::zeros(),
+            f.radii[2],
+        );
+        b.sphere_local(
+            &format!("{}_bottom", f.name),
+            b2,
+            Vector3::zeros(),
+            f.radii[1],
+        );
+        b.sphere_local(
+            &format!("{}_base", f.name),
+            b1,
+            Vector3::zeros(),
+            f.radii[0],
+        );
     }
     let thumb_top = b.sphere_local("thumb_top", t3, Vector3::new(0.0, t_top, 0.0), 7.5);
     b.sphere_local("thumb_middle", t3, Vector3::zeros(), 8.5);
@@ -182,9 +365,19 @@ fn build() -> Result<SphereMeshTemplate> {
     b.sphere_at("palm_left", palm, [-14.0, 6.0, 0.0], 15.0);
     for (fi, f) in FINGERS.iter().enumerate().rev() {
         let b1 = digit_bones[fi + 1].0;
-        b.sphere_local(&format!("{}_membrane", f.name), b1, Vector3::from(f.membrane), f.membrane_radius);
+        b.sphere_local(
+            &format!("{}_membrane", f.name),
+            b1,
+            Vector3::from(f.membrane),
+            f.membrane_radius,
+        );
     }
-    let thumb_additional = b.sphere_local("thumb_additional", t3, Vector3::new(0.0, t_top + 6.0, 1.5), 5.0);
+    let thumb_additional = b.sphere_local(
+        "thumb_additional",
+        t3,
+        Vector3::new(0.0, t_top + 6.0, 1.5),
+        5.0,
+    );
     let tml = b.sphere_local("thumb_membrane_left", t2, Vector3::new(0.0, 12.0, 0.0), 4.0);
     b.sphere_at("wrist_top_left", wrist, [-10.0, -4.0, 0.0], 15.0);
     b.sphere_at("wrist_top_right", wrist, [10.0, -4.0, 0.0], 15.0);
@@ -192,7 +385,9 @@ fn build() -> Result<SphereMeshTemplate> {
     b.sphere_at("wrist_bottom_right", wrist, [10.0, -50.0, 0.0], 17.0);
     b.spheres.push(SphereDef {
         name: "thumb_membrane_middle".into(),
-        attachment: Attachment::Blend { parts: vec![(palm_thumb, 0.4), (tml, 0.3), (thumb_base, 0.3)] },
+        attachment: Attachment::Blend {
+            parts: vec![(palm_thumb, 0.4), (tml, 0.3), (thumb_base, 0.3)],
+        },
         radius: 0.0,
     });
     tips[0] = thumb_additional;
@@ -200,13 +395,32 @@ fn build() -> Result<SphereMeshTemplate> {
 
     let skeleton = Skeleton::new(b.bones, b.dofs, Path::new("<default template>"))?;
     let spheres = b.spheres;
-    let idx = |name: &str| spheres.iter().position(|s| s.name == name).map(|i| i as u32).expect("named sphere");
+    let idx = |name: &str| {
+        spheres
+            .iter()
+            .position(|s| s.name == name)
+            .map(|i| i as u32)
+            .expect("named sphere")
+    };
     let bone = |name: &str| skeleton.bone_index(name).expect("named bone");
     let mut elements = Vec::new();
-    for (digit, bones) in [("pinky", "pinky"), ("ring", "ring"), ("middle", "middle"), ("index", "index"), ("thumb", "thumb")] {
-        for (a, c, k) in [("middle", "top", 3), ("bottom", "middle", 2), ("base", "bottom", 1)] {
+    for (digit, bones) in [
+        ("pinky", "pinky"),
+        ("ring", "ring"),
+        ("middle", "middle"),
+        ("index", "index"),
+        ("thumb", "thumb"),
+    ] {
+        for (a, c, k) in [
+            ("middle", "top", 3),
+            ("bottom", "middle", 2),
+            ("base", "bottom", 1),
+        ] {
             elements.push(ElementDef {
-                element: Element::Pill([idx(&format!("{digit}_{a}")), idx(&format!("{digit}_{c}"))]),
+                element: Element::Pill([
+                    idx(&format!("{digit}_{a}")),
+                    idx(&format!("{digit}_{c}")),
+                ]),
                 bone: bone(&format!("{bones}_{k}")),
             });
         }
@@ -226,11 +440,26 @@ fn build() -> Result<SphereMeshTemplate> {
         wedge("palm_index", "middle_membrane", "index_membrane"),
         wedge("thumb_base", "thumb_membrane_middle", "palm_thumb"),
     ];
-    elements.extend(palm_wedges.into_iter().map(|element| ElementDef { element, bone: palm }));
-    elements.push(ElementDef { element: Element::Pill([idx("thumb_top"), idx("thumb_additional")]), bone: t3 });
-    elements.push(ElementDef { element: wedge("wrist_bottom_left", "wrist_top_left", "wrist_top_right"), bone: wrist });
-    elements.push(ElementDef { element: wedge("wrist_bottom_right", "wrist_bottom_left", "wrist_top_right"), bone: wrist });
-    elements.push(ElementDef { element: wedge("thumb_base", "thumb_membrane_middle", "thumb_membrane_left"), bone: palm });
+    elements.extend(palm_wedges.into_iter().map(|element| ElementDef {
+        element,
+        bone: palm,
+    }));
+    elements.push(ElementDef {
+        element: Element::Pill([idx("thumb_top"), idx("thumb_additional")]),
+        bone: t3,
+    });
+    elements.push(ElementDef {
+        element: wedge("wrist_bottom_left", "wrist_top_left", "wrist_top_right"),
+        bone: wrist,
+    });
+    elements.push(ElementDef {
+        element: wedge("wrist_bottom_right", "wrist_bottom_left", "wrist_top_right"),
+        bone: wrist,
+    });
+    elements.push(ElementDef {
+        element: wedge("thumb_base", "thumb_membrane_middle", "thumb_membrane_left"),
+        bone: palm,
+    });
 
     let mut keypoints = vec![KeypointDef::Joint { bone: wrist }];
     for (d, &(b1, b2, b3)) in digit_bones.iter().enumerate() {
@@ -238,7 +467,10 @@ fn build() -> Result<SphereMeshTemplate> {
             KeypointDef::Joint { bone: b1 },
             KeypointDef::Joint { bone: b2 },
             KeypointDef::Joint { bone: b3 },
-            KeypointDef::Tip { bone: b3, sphere: tips[d] },
+            KeypointDef::Tip {
+                bone: b3,
+                sphere: tips[d],
+            },
         ]);
     }
     let template = SphereMeshTemplate {

@@ -27,7 +27,9 @@ fn place_spheres_into(defs: &[SphereDef], globals: &[Rigid3], out: &mut Vec<Sphe
     out.clear();
     for d in defs {
         let s = match &d.attachment {
-            Attachment::Bone { bone, offset } => Sphere::new(globals[*bone].transform_point(offset), d.radius),
+            Attachment::Bone { bone, offset } => {
+                Sphere::new(globals[*bone].transform_point(offset), d.radius)
+            }
             Attachment::Blend { parts } => {
                 let mut c = Vector3::zeros();
                 let mut r = 0.0;
@@ -61,12 +63,13 @@ impl PosedSphereMesh {
         &self,
         template: &SphereMeshTemplate,
         i: usize,
-        f: &mut impl FnMut(usize, Vector3<f64>),
+        f: &mut dyn FnMut(usize, Vector3<f64>),
     ) {
         match &template.spheres[i].attachment {
             Attachment::Bone { bone, .. } => {
                 let c = self.spheres[i].center;
-                self.skeleton.for_each_column(&template.skeleton, *bone, &c, |d, col| f(d, col));
+                self.skeleton
+                    .for_each_column(&template.skeleton, *bone, &c, &mut *f);
             }
             Attachment::Blend { parts } => {
                 for &(p, w) in parts {

@@ -129,16 +129,25 @@ struct Builder<'a> {
 
 impl Builder<'_> {
     fn bone(&self, name: &str) -> Result<usize> {
-        self.t
-            .skeleton
-            .bone_index(name)
-            .ok_or_else(|| ModelError::field("<template>", "bones", None, format!("the honline shape vector needs bone `{name}`")))
+        self.t.skeleton.bone_index(name).ok_or_else(|| {
+            ModelError::field(
+                "<template>",
+                "bones",
+                None,
+                format!("the honline shape vector needs bone `{name}`"),
+            )
+        })
     }
 
     fn sphere(&self, name: &str) -> Result<usize> {
-        self.t
-            .sphere_index(name)
-            .ok_or_else(|| ModelError::field("<template>", "spheres", None, format!("the honline shape vector needs sphere `{name}`")))
+        self.t.sphere_index(name).ok_or_else(|| {
+            ModelError::field(
+                "<template>",
+                "spheres",
+                None,
+                format!("the honline shape vector needs sphere `{name}`"),
+            )
+        })
     }
 
     fn offset(&self, sphere: usize) -> Result<Vector3<f64>> {
@@ -163,16 +172,32 @@ impl Builder<'_> {
         });
     }
 
-    fn length(&mut self, name: String, child_bone: usize, extra: Vec<ShapeEffect>) -> Result<Vector3<f64>> {
+    fn length(
+        &mut self,
+        name: String,
+        child_bone: usize,
+        extra: Vec<ShapeEffect>,
+    ) -> Result<Vector3<f64>> {
         let t = self.t.skeleton.bones()[child_bone].rest.translation;
         let len = t.norm();
         if len < 1e-9 {
-            return Err(ModelError::field("<template>", "bones.rest", Some(child_bone), "zero-length phalanx"));
+            return Err(ModelError::field(
+                "<template>",
+                "bones.rest",
+                Some(child_bone),
+                "zero-length phalanx",
+            ));
         }
         let dir = t / len;
-        let mut effects = vec![ShapeEffect::RestTranslation { bone: child_bone, dir }];
+        let mut effects = vec![ShapeEffect::RestTranslation {
+            bone: child_bone,
+            dir,
+        }];
         effects.extend(extra.into_iter().map(|e| match e {
-            ShapeEffect::Offset { sphere, dir: f } => ShapeEffect::Offset { sphere, dir: dir * f.x },
+            ShapeEffect::Offset { sphere, dir: f } => ShapeEffect::Offset {
+                sphere,
+                dir: dir * f.x,
+            },
             other => other,
         }));
         self.push(name, ShapeKind::PhalangeLength, len, effects);
@@ -184,7 +209,10 @@ impl ShapeBasis {
     /// The 75-entry FULL honline shape vector (ANCHOR-FACTS §2.5) for any template with the
     /// honline sphere names and the bone names of this crate (`thumb_1`, `index_2`, `wrist`, ...).
     pub fn honline(template: &SphereMeshTemplate) -> Result<ShapeBasis> {
-        let mut b = Builder { t: template, params: Vec::with_capacity(75) };
+        let mut b = Builder {
+            t: template,
+            params: Vec::with_capacity(75),
+        };
         // 0..15: phalanx lengths (bottom, middle, top) per digit.
         for (di, digit) in DIGITS.iter().enumerate() {
             let b1 = b.bone(&format!("{digit}_1"))?;
@@ -195,7 +223,10 @@ impl ShapeBasis {
             // here as a placeholder x-coefficient, replaced by the real direction in `length`).
             let extra = if di > 0 {
                 let m = b.sphere(&format!("{digit}_membrane"))?;
-                vec![ShapeEffect::Offset { sphere: m, dir: Vector3::new(MEMBRANE_FRACTIONS[di - 1], 0.0, 0.0) }]
+                vec![ShapeEffect::Offset {
+                    sphere: m,
+                    dir: Vector3::new(MEMBRANE_FRACTIONS[di - 1], 0.0, 0.0),
+                }]
             } else {
                 vec![]
             };
@@ -208,18 +239,38 @@ impl ShapeBasis {
             let mut effects = vec![ShapeEffect::Offset { sphere: top, dir }];
             if di == 0 {
                 let add = b.sphere("thumb_additional")?;
-                effects.push(ShapeEffect::Offset { sphere: add, dir: Vector3::new(0.0, dir.y, dir.z) });
+                effects.push(ShapeEffect::Offset {
+                    sphere: add,
+                    dir: Vector3::new(0.0, dir.y, dir.z),
+                });
             }
-            b.push(format!("{digit}_top_length"), ShapeKind::TopPhalangeLength, len, effects);
+            b.push(
+                format!("{digit}_top_length"),
+                ShapeKind::TopPhalangeLength,
+                len,
+                effects,
+            );
         }
         // 15..30: finger base positions (rest translation of the first bone in the palm frame).
         for digit in DIGITS {
             let b1 = b.bone(&format!("{digit}_1"))?;
             let t = template.skeleton.bones()[b1].rest.translation;
-            for (axis, kind) in [ShapeKind::FingerBaseX, ShapeKind::FingerBaseY, ShapeKind::FingerBaseZ].into_iter().enumerate() {
+            for (axis, kind) in [
+                ShapeKind::FingerBaseX,
+                ShapeKind::FingerBaseY,
+                ShapeKind::FingerBaseZ,
+            ]
+            .into_iter()
+            .enumerate()
+            {
                 let dir = Vector3::ith(axis, 1.0);
                 let name = format!("{digit}_base_{}", ["x", "y", "z"][axis]);
-                b.push(name, kind, t[axis], vec![ShapeEffect::RestTranslation { bone: b1, dir }]);
+                b.push(
+                    name,
+                    kind,
+                    t[axis],
+                    vec![ShapeEffect::RestTranslation { bone: b1, dir }],
+                );
             }
         }
         // 30..40: palm centers x/y; palm_middle and palm_ring follow index and pinky.
@@ -233,15 +284,33 @@ impl ShapeBasis {
             let rho = (oi - b.offset(s)?).norm() / span;
             passive.push((s, rho));
         }
-        for (label, sphere) in [("index", pi), ("pinky", pp), ("left", b.sphere("palm_left")?), ("right", b.sphere("palm_right")?), ("thumb", b.sphere("palm_thumb")?)] {
+        for (label, sphere) in [
+            ("index", pi),
+            ("pinky", pp),
+            ("left", b.sphere("palm_left")?),
+            ("right", b.sphere("palm_right")?),
+            ("thumb", b.sphere("palm_thumb")?),
+        ] {
             let off = b.offset(sphere)?;
-            for (axis, kind) in [ShapeKind::PalmCenterX, ShapeKind::PalmCenterY].into_iter().enumerate() {
+            for (axis, kind) in [ShapeKind::PalmCenterX, ShapeKind::PalmCenterY]
+                .into_iter()
+                .enumerate()
+            {
                 let dir = Vector3::ith(axis, 1.0);
                 let mut effects = vec![ShapeEffect::Offset { sphere, dir }];
                 for &(s, rho) in &passive {
-                    let w = if sphere == pi { 1.0 - rho } else if sphere == pp { rho } else { 0.0 };
+                    let w = if sphere == pi {
+                        1.0 - rho
+                    } else if sphere == pp {
+                        rho
+                    } else {
+                        0.0
+                    };
                     if w != 0.0 {
-                        effects.push(ShapeEffect::Offset { sphere: s, dir: dir * w });
+                        effects.push(ShapeEffect::Offset {
+                            sphere: s,
+                            dir: dir * w,
+                        });
                     }
                 }
                 let name = format!("{label}_palm_center_{}", ["x", "y"][axis]);
@@ -249,51 +318,156 @@ impl ShapeBasis {
             }
         }
         // 40..46: wrist and thumb extras.
-        let (wbl, wbr) = (b.sphere("wrist_bottom_left")?, b.sphere("wrist_bottom_right")?);
+        let (wbl, wbr) = (
+            b.sphere("wrist_bottom_left")?,
+            b.sphere("wrist_bottom_right")?,
+        );
         let (wtl, wtr) = (b.sphere("wrist_top_left")?, b.sphere("wrist_top_right")?);
         let obl = b.offset(wbl)?;
         let sx = if obl.x < 0.0 { -1.0 } else { 1.0 };
         let ex = Vector3::x() * sx;
-        b.push("wrist_width".into(), ShapeKind::PalmCenterX, obl.x * sx, vec![
-            ShapeEffect::Offset { sphere: wbl, dir: ex },
-            ShapeEffect::Offset { sphere: wbr, dir: -ex },
-            ShapeEffect::Offset { sphere: wtr, dir: -ex },
-        ]);
-        b.push("wrist_length".into(), ShapeKind::PalmCenterY, -obl.y, vec![
-            ShapeEffect::Offset { sphere: wbl, dir: -Vector3::y() },
-            ShapeEffect::Offset { sphere: wbr, dir: -Vector3::y() },
-        ]);
+        b.push(
+            "wrist_width".into(),
+            ShapeKind::PalmCenterX,
+            obl.x * sx,
+            vec![
+                ShapeEffect::Offset {
+                    sphere: wbl,
+                    dir: ex,
+                },
+                ShapeEffect::Offset {
+                    sphere: wbr,
+                    dir: -ex,
+                },
+                ShapeEffect::Offset {
+                    sphere: wtr,
+                    dir: -ex,
+                },
+            ],
+        );
+        b.push(
+            "wrist_length".into(),
+            ShapeKind::PalmCenterY,
+            -obl.y,
+            vec![
+                ShapeEffect::Offset {
+                    sphere: wbl,
+                    dir: -Vector3::y(),
+                },
+                ShapeEffect::Offset {
+                    sphere: wbr,
+                    dir: -Vector3::y(),
+                },
+            ],
+        );
         let tml = b.sphere("thumb_membrane_left")?;
         let otml = b.offset(tml)?;
         let ltml = otml.norm();
-        let dtml = if ltml > 1e-9 { otml / ltml } else { Vector3::y() };
-        b.push("thumb_membrane_length".into(), ShapeKind::TopPhalangeLength, ltml, vec![ShapeEffect::Offset { sphere: tml, dir: dtml }]);
+        let dtml = if ltml > 1e-9 {
+            otml / ltml
+        } else {
+            Vector3::y()
+        };
+        b.push(
+            "thumb_membrane_length".into(),
+            ShapeKind::TopPhalangeLength,
+            ltml,
+            vec![ShapeEffect::Offset {
+                sphere: tml,
+                dir: dtml,
+            }],
+        );
         let add = b.sphere("thumb_additional")?;
         let top = b.sphere("thumb_top")?;
         let rel = b.offset(add)? - b.offset(top)?;
-        b.push("thumb_additional_y".into(), ShapeKind::FingerTopY, rel.y, vec![ShapeEffect::Offset { sphere: add, dir: Vector3::y() }]);
-        b.push("thumb_additional_z".into(), ShapeKind::FingerTopZ, rel.z, vec![ShapeEffect::Offset { sphere: add, dir: Vector3::z() }]);
-        b.push("wrist_width_left".into(), ShapeKind::PalmCenterX, b.offset(wtl)?.x * sx, vec![ShapeEffect::Offset { sphere: wtl, dir: ex }]);
+        b.push(
+            "thumb_additional_y".into(),
+            ShapeKind::FingerTopY,
+            rel.y,
+            vec![ShapeEffect::Offset {
+                sphere: add,
+                dir: Vector3::y(),
+            }],
+        );
+        b.push(
+            "thumb_additional_z".into(),
+            ShapeKind::FingerTopZ,
+            rel.z,
+            vec![ShapeEffect::Offset {
+                sphere: add,
+                dir: Vector3::z(),
+            }],
+        );
+        b.push(
+            "wrist_width_left".into(),
+            ShapeKind::PalmCenterX,
+            b.offset(wtl)?.x * sx,
+            vec![ShapeEffect::Offset {
+                sphere: wtl,
+                dir: ex,
+            }],
+        );
         // 46..75: radii.
         for digit in DIGITS {
             for part in ["base", "bottom", "middle", "top"] {
                 let s = b.sphere(&format!("{digit}_{part}"))?;
-                let mut effects = vec![ShapeEffect::Radius { sphere: s, coef: 1.0 }];
+                let mut effects = vec![ShapeEffect::Radius {
+                    sphere: s,
+                    coef: 1.0,
+                }];
                 if digit == "thumb" && part == "top" {
-                    effects.push(ShapeEffect::Radius { sphere: add, coef: 0.67 });
+                    effects.push(ShapeEffect::Radius {
+                        sphere: add,
+                        coef: 0.67,
+                    });
                 }
-                b.push(format!("{digit}_{part}_radius"), ShapeKind::Radius, template.spheres[s].radius, effects);
+                b.push(
+                    format!("{digit}_{part}_radius"),
+                    ShapeKind::Radius,
+                    template.spheres[s].radius,
+                    effects,
+                );
             }
         }
-        for name in ["palm_index", "palm_middle", "palm_ring", "palm_pinky", "palm_left", "palm_back", "palm_right"] {
+        for name in [
+            "palm_index",
+            "palm_middle",
+            "palm_ring",
+            "palm_pinky",
+            "palm_left",
+            "palm_back",
+            "palm_right",
+        ] {
             let s = b.sphere(name)?;
-            b.push(format!("{name}_radius"), ShapeKind::Radius, template.spheres[s].radius, vec![ShapeEffect::Radius { sphere: s, coef: 1.0 }]);
+            b.push(
+                format!("{name}_radius"),
+                ShapeKind::Radius,
+                template.spheres[s].radius,
+                vec![ShapeEffect::Radius {
+                    sphere: s,
+                    coef: 1.0,
+                }],
+            );
         }
-        for (a, c, name) in [(wtl, wtr, "wrist_top_left_radius"), (wbl, wbr, "wrist_bottom_left_radius")] {
-            b.push(name.into(), ShapeKind::Radius, template.spheres[a].radius, vec![
-                ShapeEffect::Radius { sphere: a, coef: 1.0 },
-                ShapeEffect::Radius { sphere: c, coef: 1.0 },
-            ]);
+        for (a, c, name) in [
+            (wtl, wtr, "wrist_top_left_radius"),
+            (wbl, wbr, "wrist_bottom_left_radius"),
+        ] {
+            b.push(
+                name.into(),
+                ShapeKind::Radius,
+                template.spheres[a].radius,
+                vec![
+                    ShapeEffect::Radius {
+                        sphere: a,
+                        coef: 1.0,
+                    },
+                    ShapeEffect::Radius {
+                        sphere: c,
+                        coef: 1.0,
+                    },
+                ],
+            );
         }
         Ok(ShapeBasis { params: b.params })
     }
@@ -322,10 +496,16 @@ impl ShapeBasis {
     /// or a shape with a negative radius or a zero-length phalanx.
     pub fn apply(&self, template: &SphereMeshTemplate, beta: &[f64]) -> Result<SphereMeshTemplate> {
         if beta.len() != self.len() {
-            return Err(ModelError::InvalidArgument { name: "beta", reason: format!("{} values for {} parameters", beta.len(), self.len()) });
+            return Err(ModelError::InvalidArgument {
+                name: "beta",
+                reason: format!("{} values for {} parameters", beta.len(), self.len()),
+            });
         }
         if let Some(i) = beta.iter().position(|v| !v.is_finite()) {
-            return Err(ModelError::InvalidArgument { name: "beta", reason: format!("`{}` is not finite", self.params[i].name) });
+            return Err(ModelError::InvalidArgument {
+                name: "beta",
+                reason: format!("`{}` is not finite", self.params[i].name),
+            });
         }
         let mut out = template.clone();
         let mut rests: Vec<_> = template.skeleton.bones().iter().map(|b| b.rest).collect();
@@ -333,13 +513,18 @@ impl ShapeBasis {
             let delta = v - p.template_value;
             for e in &p.effects {
                 match *e {
-                    ShapeEffect::RestTranslation { bone, dir } => rests[bone].translation += dir * delta,
+                    ShapeEffect::RestTranslation { bone, dir } => {
+                        rests[bone].translation += dir * delta
+                    }
                     ShapeEffect::Offset { sphere, dir } => {
-                        if let Attachment::Bone { offset, .. } = &mut out.spheres[sphere].attachment {
+                        if let Attachment::Bone { offset, .. } = &mut out.spheres[sphere].attachment
+                        {
                             *offset += dir * delta;
                         }
                     }
-                    ShapeEffect::Radius { sphere, coef } => out.spheres[sphere].radius += coef * delta,
+                    ShapeEffect::Radius { sphere, coef } => {
+                        out.spheres[sphere].radius += coef * delta
+                    }
                 }
             }
         }
@@ -348,7 +533,10 @@ impl ShapeBasis {
         }
         for (i, s) in out.spheres.iter().enumerate() {
             if matches!(s.attachment, Attachment::Bone { .. }) && s.radius < 0.0 {
-                return Err(ModelError::InvalidArgument { name: "beta", reason: format!("sphere `{}` (index {i}) gets a negative radius", s.name) });
+                return Err(ModelError::InvalidArgument {
+                    name: "beta",
+                    reason: format!("sphere `{}` (index {i}) gets a negative radius", s.name),
+                });
             }
         }
         out.validate(Path::new("<shape>"))?;
@@ -358,11 +546,18 @@ impl ShapeBasis {
     /// (C̄, r̄) ↦ β: the β whose shape is closest (least squares over rest translations, sphere
     /// offsets and radii) to `target`, a template of the same topology as `template`. Returns β
     /// and the RMS of what β cannot express (mm).
-    pub fn fit(&self, template: &SphereMeshTemplate, target: &SphereMeshTemplate) -> Result<(Vec<f64>, f64)> {
+    pub fn fit(
+        &self,
+        template: &SphereMeshTemplate,
+        target: &SphereMeshTemplate,
+    ) -> Result<(Vec<f64>, f64)> {
         let nb = template.skeleton.bones().len();
         let ns = template.spheres.len();
         if target.skeleton.bones().len() != nb || target.spheres.len() != ns {
-            return Err(ModelError::InvalidArgument { name: "target", reason: "the target template has another topology".into() });
+            return Err(ModelError::InvalidArgument {
+                name: "target",
+                reason: "the target template has another topology".into(),
+            });
         }
         let rows = 3 * nb + 4 * ns;
         let mut a = DMatrix::<f64>::zeros(rows, self.len());
@@ -379,29 +574,43 @@ impl ShapeBasis {
                             a[(3 * nb + 3 * sphere + k, j)] += dir[k];
                         }
                     }
-                    ShapeEffect::Radius { sphere, coef } => a[(3 * nb + 3 * ns + sphere, j)] += coef,
+                    ShapeEffect::Radius { sphere, coef } => {
+                        a[(3 * nb + 3 * ns + sphere, j)] += coef
+                    }
                 }
             }
         }
         let mut dq = DVector::<f64>::zeros(rows);
         for b in 0..nb {
-            let d = target.skeleton.bones()[b].rest.translation - template.skeleton.bones()[b].rest.translation;
+            let d = target.skeleton.bones()[b].rest.translation
+                - template.skeleton.bones()[b].rest.translation;
             dq.fixed_rows_mut::<3>(3 * b).copy_from(&d);
         }
         for s in 0..ns {
-            if let (Attachment::Bone { offset: o1, .. }, Attachment::Bone { offset: o2, .. }) = (&template.spheres[s].attachment, &target.spheres[s].attachment) {
+            if let (Attachment::Bone { offset: o1, .. }, Attachment::Bone { offset: o2, .. }) = (
+                &template.spheres[s].attachment,
+                &target.spheres[s].attachment,
+            ) {
                 dq.fixed_rows_mut::<3>(3 * nb + 3 * s).copy_from(&(o2 - o1));
                 dq[3 * nb + 3 * ns + s] = target.spheres[s].radius - template.spheres[s].radius;
             }
         }
         let ata = a.transpose() * &a;
         let atb = a.transpose() * &dq;
-        let x = ata
-            .cholesky()
-            .map(|c| c.solve(&atb))
-            .ok_or_else(|| ModelError::InvalidArgument { name: "target", reason: "shape basis is rank deficient on this template".into() })?;
+        let x =
+            ata.cholesky()
+                .map(|c| c.solve(&atb))
+                .ok_or_else(|| ModelError::InvalidArgument {
+                    name: "target",
+                    reason: "shape basis is rank deficient on this template".into(),
+                })?;
         let resid = (&a * &x - &dq).norm() / (rows as f64).sqrt();
-        let beta = self.params.iter().zip(x.iter()).map(|(p, d)| p.template_value + d).collect();
+        let beta = self
+            .params
+            .iter()
+            .zip(x.iter())
+            .map(|(p, d)| p.template_value + d)
+            .collect();
         Ok((beta, resid))
     }
 
@@ -412,12 +621,14 @@ impl ShapeBasis {
         template: &SphereMeshTemplate,
         posed: &PosedSphereMesh,
         i: usize,
-        f: &mut impl FnMut(usize, Vector3<f64>, f64),
+        f: &mut dyn FnMut(usize, Vector3<f64>, f64),
     ) {
         match &template.spheres[i].attachment {
             Attachment::Blend { parts } => {
                 for &(p, w) in parts {
-                    self.for_each_sphere_column(template, posed, p, &mut |j, dc, dr| f(j, dc * w, dr * w));
+                    self.for_each_sphere_column(template, posed, p, &mut |j, dc, dr| {
+                        f(j, dc * w, dr * w)
+                    });
                 }
             }
             Attachment::Bone { bone, .. } => {
@@ -428,11 +639,15 @@ impl ShapeBasis {
                     let mut hit = false;
                     for e in &p.effects {
                         match *e {
-                            ShapeEffect::RestTranslation { bone: b, dir } => {
-                                if template.skeleton.is_ancestor_or_self(b, bone) {
-                                    dc += posed.skeleton.rest_translation_jacobian(&template.skeleton, b, bone) * dir;
-                                    hit = true;
-                                }
+                            ShapeEffect::RestTranslation { bone: b, dir }
+                                if template.skeleton.is_ancestor_or_self(b, bone) =>
+                            {
+                                dc += posed.skeleton.rest_translation_jacobian(
+                                    &template.skeleton,
+                                    b,
+                                    bone,
+                                ) * dir;
+                                hit = true;
                             }
                             ShapeEffect::Offset { sphere, dir } if sphere == i => {
                                 dc += posed.skeleton.globals[bone].rotation * dir;
@@ -456,6 +671,9 @@ impl ShapeBasis {
     /// Eq. 4.14: β = β̄ ∘ I·β̃ for the latent scale factors β̃ = (height, width, thickness)
     /// (1 = template). ∂β_i/∂β̃_k = β̄_i when entry i scales with axis k ([`ShapeKind::latent_axis`]).
     pub fn from_latent(&self, latent: [f64; 3]) -> Vec<f64> {
-        self.params.iter().map(|p| p.template_value * latent[p.kind.latent_axis()]).collect()
+        self.params
+            .iter()
+            .map(|p| p.template_value * latent[p.kind.latent_axis()])
+            .collect()
     }
 }

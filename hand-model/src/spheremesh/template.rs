@@ -78,26 +78,52 @@ impl SphereMeshTemplate {
         }
         for (i, s) in self.spheres.iter().enumerate() {
             if self.spheres[..i].iter().any(|o| o.name == s.name) {
-                return Err(ModelError::field(source, "spheres.name", Some(i), format!("duplicate name `{}`", s.name)));
+                return Err(ModelError::field(
+                    source,
+                    "spheres.name",
+                    Some(i),
+                    format!("duplicate name `{}`", s.name),
+                ));
             }
             match &s.attachment {
                 Attachment::Bone { bone, offset } => {
                     if *bone >= nb {
-                        return Err(ModelError::field(source, "spheres.bone", Some(i), format!("bone index {bone} out of range ({nb} bones)")));
+                        return Err(ModelError::field(
+                            source,
+                            "spheres.bone",
+                            Some(i),
+                            format!("bone index {bone} out of range ({nb} bones)"),
+                        ));
                     }
                     if !offset.iter().all(|x| x.is_finite()) {
-                        return Err(ModelError::field(source, "spheres.center", Some(i), "non-finite center"));
+                        return Err(ModelError::field(
+                            source,
+                            "spheres.center",
+                            Some(i),
+                            "non-finite center",
+                        ));
                     }
                     if !(s.radius.is_finite() && s.radius >= 0.0) {
-                        return Err(ModelError::field(source, "spheres.radius", Some(i), format!("radius must be finite and ≥ 0, got {}", s.radius)));
+                        return Err(ModelError::field(
+                            source,
+                            "spheres.radius",
+                            Some(i),
+                            format!("radius must be finite and ≥ 0, got {}", s.radius),
+                        ));
                     }
                 }
                 Attachment::Blend { parts } => {
                     if parts.is_empty() {
-                        return Err(ModelError::field(source, "spheres.blend", Some(i), "empty blend"));
+                        return Err(ModelError::field(
+                            source,
+                            "spheres.blend",
+                            Some(i),
+                            "empty blend",
+                        ));
                     }
                     for &(p, w) in parts {
-                        let ok = p < i && matches!(self.spheres[p].attachment, Attachment::Bone { .. });
+                        let ok =
+                            p < i && matches!(self.spheres[p].attachment, Attachment::Bone { .. });
                         if !ok || !w.is_finite() || w < 0.0 {
                             return Err(ModelError::field(source, "spheres.blend", Some(i), format!("part {p} must be an earlier bone-attached sphere with a weight ≥ 0")));
                         }
@@ -108,18 +134,44 @@ impl SphereMeshTemplate {
         for (e, def) in self.elements.iter().enumerate() {
             let idx = def.element.spheres();
             if let Some(&bad) = idx.iter().find(|&&s| s as usize >= ns) {
-                return Err(ModelError::field(source, "elements", Some(e), format!("sphere index {bad} out of range ({ns} spheres)")));
+                return Err(ModelError::field(
+                    source,
+                    "elements",
+                    Some(e),
+                    format!("sphere index {bad} out of range ({ns} spheres)"),
+                ));
             }
-            let distinct = idx.iter().enumerate().all(|(a, x)| idx[..a].iter().all(|y| y != x));
+            let distinct = idx
+                .iter()
+                .enumerate()
+                .all(|(a, x)| idx[..a].iter().all(|y| y != x));
             if !distinct {
-                return Err(ModelError::field(source, "elements", Some(e), "an element repeats a sphere"));
+                return Err(ModelError::field(
+                    source,
+                    "elements",
+                    Some(e),
+                    "an element repeats a sphere",
+                ));
             }
             if def.bone >= nb {
-                return Err(ModelError::field(source, "elements.bone", Some(e), format!("bone index {} out of range", def.bone)));
+                return Err(ModelError::field(
+                    source,
+                    "elements.bone",
+                    Some(e),
+                    format!("bone index {} out of range", def.bone),
+                ));
             }
         }
         if self.keypoints.len() != NUM_KEYPOINTS {
-            return Err(ModelError::field(source, "keypoints", None, format!("{} keypoints, expected {NUM_KEYPOINTS}", self.keypoints.len())));
+            return Err(ModelError::field(
+                source,
+                "keypoints",
+                None,
+                format!(
+                    "{} keypoints, expected {NUM_KEYPOINTS}",
+                    self.keypoints.len()
+                ),
+            ));
         }
         for (k, kp) in self.keypoints.iter().enumerate() {
             let (bone, sphere) = match kp {
@@ -127,7 +179,12 @@ impl SphereMeshTemplate {
                 KeypointDef::Tip { bone, sphere } => (*bone, Some(*sphere)),
             };
             if bone >= nb || sphere.is_some_and(|s| s >= ns) {
-                return Err(ModelError::field(source, "keypoints", Some(k), "bone or sphere index out of range"));
+                return Err(ModelError::field(
+                    source,
+                    "keypoints",
+                    Some(k),
+                    "bone or sphere index out of range",
+                ));
             }
         }
         Ok(())
@@ -146,7 +203,11 @@ impl SphereMeshTemplate {
 
     /// Number of pills and wedges.
     pub fn element_counts(&self) -> (usize, usize) {
-        let pills = self.elements.iter().filter(|e| matches!(e.element, Element::Pill(_))).count();
+        let pills = self
+            .elements
+            .iter()
+            .filter(|e| matches!(e.element, Element::Pill(_)))
+            .count();
         (pills, self.elements.len() - pills)
     }
 
