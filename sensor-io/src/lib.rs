@@ -1,9 +1,19 @@
 //! # sensor-io — depth input for the `hands` workspace
 //!
-//! Not built yet (issue 3). This crate will hold:
-//! - depth (`u16` mm) and optional RGB frames with timestamps;
-//! - pinhole cameras (OpenCV optical frame, DESIGN.md) with projection, back-projection and
-//!   the 2×3 projection Jacobian, plus the presets of the papers (SR300/Handy, Creative/Dexter, NYU);
-//! - streaming sequence I/O in the folder and MCAP formats of DESIGN.md;
-//! - preprocessing: wristband and depth-only hand segmentation, median downsampling, point
-//!   subsampling, normals, and the exact Euclidean distance transform of the silhouette.
+//! - [`camera`]: pinhole cameras (OpenCV optical frame) with projection, back-projection, the
+//!   2×3 projection Jacobian and the presets of the papers;
+//! - [`image`]: depth (`u16` mm), color and mask images, frames;
+//! - [`dt`]: the exact Euclidean distance transform with closest-pixel indices;
+//! - [`preprocess`]: downsampling, segmentation, normals, subsampling: the per-frame pipeline.
+
+pub mod camera;
+pub mod dt;
+pub mod error;
+pub mod image;
+pub mod io;
+pub mod preprocess;
+pub mod record;
+
+pub use camera::Camera;
+pub use error::{Result, SensorError};
+pub use image::{ColorImage, DepthImage, Frame, Mask};

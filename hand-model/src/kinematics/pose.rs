@@ -63,7 +63,10 @@ impl Pose {
 
     /// A pose from `{dof name: value}` pairs (the pose object of DESIGN.md's track and
     /// ground-truth files); DOFs not named stay 0, unknown names and non-finite values are refused.
-    pub fn from_named<'a>(skeleton: &Skeleton, named: impl IntoIterator<Item = (&'a str, f64)>) -> Result<Self> {
+    pub fn from_named<'a>(
+        skeleton: &Skeleton,
+        named: impl IntoIterator<Item = (&'a str, f64)>,
+    ) -> Result<Self> {
         let mut pose = Pose::zeros(skeleton);
         for (name, value) in named {
             pose.set(skeleton, name, value)?;
@@ -72,8 +75,15 @@ impl Pose {
     }
 
     /// `(dof name, value)` pairs in pose-vector order.
-    pub fn named<'a>(&'a self, skeleton: &'a Skeleton) -> impl Iterator<Item = (&'a str, f64)> + 'a {
-        skeleton.dofs().iter().map(|d| d.name.as_str()).zip(self.values.iter().copied())
+    pub fn named<'a>(
+        &'a self,
+        skeleton: &'a Skeleton,
+    ) -> impl Iterator<Item = (&'a str, f64)> + 'a {
+        skeleton
+            .dofs()
+            .iter()
+            .map(|d| d.name.as_str())
+            .zip(self.values.iter().copied())
     }
 
     /// Global translation (mm).

@@ -1,0 +1,47 @@
+//! Image files and sequences on disk (DESIGN.md "Sequences on disk"): the folder format and the
+//! MCAP format, behind one streaming reader/writer interface.
+
+mod folder;
+mod png;
+
+use std::path::Path;
+
+pub use folder::{read_camera_json, FolderReader, FolderWriter};
+pub use png::{read_color_png, read_depth_png, write_atomic, write_color_png, write_depth_png};
+
+use crate::camera::Camera;
+use crate::error::Result;
+use crate::image::Frame;
+use crate::record::HandRecord;
+
+/// A sequence read one frame at a time (never the whole sequence in memory).
+pub trait SequenceReader {
+    /// The camera of the depth images.
+    fn camera(&self) -> &Camera;
+    /// Number of frames, when known without reading them.
+    fn len(&self) -> Option<usize>;
+    /// Whether the sequence is known to be empty.
+    fn is_empty(&self) -> bool {
+        self.len() == Some(0)
+    }
+    /// The next frame and its ground truth (if any); `None` at the end.
+    fn next_frame(&mut self) -> Option<Result<(Frame, Option<HandRecord>)>>;
+}
+
+/// A sequence written one frame at a time.
+pub trait SequenceWriter {
+    /// Append a frame and its record.
+    fn write(&mut self, frame: &Frame, record: Option<&HandRecord>) -> Result<()>;
+    /// Flush and move temporary files into place.
+    fn finish(&mut self) -> Result<()>;
+}
+
+/// Open a sequence: an `.mcap` file or a folder.
+pub fn open_sequence(path: &Path) -> Result<Box<dyn SequenceReader>> {
+    Ok(Box::new(FolderReader::open(path)?))
+}
+
+/// Create a sequence writer: `.mcap` paths write MCAP, any other path a folder.
+pub fn create_sequence(path: &Path, camera: &Camera) -> Result<Box<dyn SequenceWriter>> {
+    Ok(Box::new(FolderWriter::create(path, camera)?))
+}

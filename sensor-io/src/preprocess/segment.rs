@@ -1,0 +1,429 @@
+//! Hand segmentation: (a) by a colored wristband (thesis §2.2 "Preprocessing", Fig. 2.5;
+//! ANCHOR-FACTS §5.6) and (b) depth-only, the nearest connected component grown from a seed
+//! inside a 3D volume (Taylor et al. 2016 §3.4) with the forearm cut by a palm-size heuristic.
+
+use std::collections::VecDeque;
+
+use nalgebra::{Matrix3, SymmetricEigen, Vector3};
+
+use crate::camera::Camera;
+use crate::dt::DistanceTransform;
+use crate::image::{ColorImage, DepthImage, Mask};
+
+/// The segmented hand of one frame.
+#[derive(Clone, Debug, Default)]
+pub struct HandSegment {
+    /// Silhouette `S_s`.
+    pub mask: Mask,
+    /// Number of silhouette pixels (0 = no hand found: trackers skip the frame with `no_hand`).
+    pub count: usize,
+    /// Estimated palm center (camera frame, mm), when a hand was found.
+    pub palm_center: Option<Vector3<f64>>,
+    /// Wristband center and unit axis pointing toward the hand (wristband segmentation only);
+    /// used by the wrist term of Eq. 2.4.
+    pub wristband: Option<(Vector3<f64>, Vector3<f64>)>,
+}
+
+/// Parameters of the depth-only segmentation.
+#[derive(Clone, Debug)]
+pub struct DepthOnlyParams {
+    /// Depths outside `[near, far]` mm are ignored.
+    pub near: u16,
+    /// Far limit (mm).
+    pub far: u16,
+    /// Radius of the growth volume around the seed (mm); Taylor 2016 uses a 19 cm volume around
+    /// the hand position, our seed is the nearest surface point so the volume is larger.
+    pub radius: f64,
+    /// Largest depth step between 4-neighbours of the same component (mm).
+    pub max_step: f64,
+    /// Distance beyond the palm center at which the forearm is cut, in palm radii (the radius
+    /// of the largest inscribed circle of the silhouette).
+    pub cut_palm_radii: f64,
+    /// Minimum component size (px) to count as a hand.
+    pub min_pixels: usize,
+    /// Longest extent of a hand along its principal axis (mm); a longer component carries a
+    /// forearm, which is cut.
+    pub max_hand_length: f64,
+}
+
+impl Default for DepthOnlyParams {
+    fn default() -> Self {
+        Self {
+            near: 150,
+            far: 1500,
+            radius: 220.0,
+            max_step: 25.0,
+            cut_palm_radii: 1.9,
+            min_pixels: 60,
+            max_hand_length: 210.0,
+        }
+    }
+}
+
+fn point(depth: &DepthImage, camera: &Camera, i: usize) -> Vector3<f64> {
+    let w = depth.width as usize;
+    camera.backproject(
+        (i % w) as f64,
+        (i / w) as f64,
+        depth.data[i] as f64 * camera.depth_unit_mm,
+    )
+}
+
+/// The nearest valid pixel with enough similar-depth support around it (rejects isolated
+/// flying pixels and speckle).
+fn find_seed(depth: &DepthImage, near: u16, far: u16) -> Option<usize> {
+    let (w, h) = (depth.width as i64, depth.height as i64);
+    let supported = |i: usize| -> bool {
+        let (u, v) = ((i as i64) % w, (i as i64) / w);
+        let d0 = depth.data[i] as i64;
+        let mut good = 0;
+        for dv in -2..=2 {
+            for du in -2..=2 {
+                let (x, y) = (u + du, v + dv);
+                if x >= 0 && y >= 0 && x < w && y < h {
+                    let d = depth.data[(y * w + x) as usize] as i64;
+                    if d != 0 && (d - d0).abs() < 30 {
+                        good += 1;
+                    }
+                }
+            }
+        }
+        good >= 15
+    };
+    let mut lo = near;
+    while lo <= far {
+        let hi = lo.saturating_add(30).min(far);
+        let mut best: Option<usize> = None;
+        let mut any_above = None::<u16>;
+        for (i, &d) in depth.data.iter().enumerate() {
+            if d >= lo && d <= hi {
+                if best.is_none_or(|b| d < depth.data[b]) && supported(i) {
+                    best = Some(i);
+                }
+            } else if d > hi && d <= far {
+                any_above = Some(any_above.map_or(d, |a| a.min(d)));
+            }
+        }
+        if best.is_some() {
+            return best;
+        }
+        lo = any_above?;
+    }
+    None
+}
+
+/// Depth-only segmentation: seed at the nearest supported pixel, 4-connected growth across depth
+/// steps below `max_step` inside a sphere of `radius` around the seed, then, when the component
+/// is longer than a hand along its principal axis (an attached forearm), a cut perpendicular to
+/// that axis `cut_palm_radii` palm radii beyond the palm center (the center of the largest
+/// inscribed circle near the hand end). An empty segment (count 0) when nothing hand-sized is in range.
+pub fn segment_depth_only(
+    depth: &DepthImage,
+    camera: &Camera,
+    params: &DepthOnlyParams,
+    out: &mut HandSegment,
+    dt: &mut DistanceTransform,
+) {
+    let (w, h) = (depth.width as usize, depth.height as usize);
+    out.mask.width = depth.width;
+    out.mask.height = depth.height;
+    out.mask.data.clear();
+    out.mask.data.resize(w * h, 0);
+    out.count = 0;
+    out.palm_center = None;
+    out.wristband = None;
+    let Some(seed) = find_seed(depth, params.near, params.far) else {
+        return;
+    };
+    let seed_p = point(depth, camera, seed);
+    let r2 = params.radius * params.radius;
+    let mut queue = VecDeque::with_capacity(4096);
+    queue.push_back(seed);
+    out.mask.data[seed] = 1;
+    while let Some(i) = queue.pop_front() {
+        let (u, v) = (i % w, i / w);
+        let d0 = depth.data[i] as f64;
+        for (du, dv) in [(-1i64, 0i64), (1, 0), (0, -1), (0, 1)] {
+            let (x, y) = (u as i64 + du, v as i64 + dv);
+            if x < 0 || y < 0 || x >= w as i64 || y >= h as i64 {
+                continue;
+            }
+            let j = y as usize * w + x as usize;
+            let d = depth.data[j];
+            if out.mask.data[j] != 0
+                || d == 0
+                || d < params.near
+                || d > params.far
+                || (d as f64 - d0).abs() > params.max_step
+            {
+                continue;
+            }
+            if (point(depth, camera, j) - seed_p).norm_squared() > r2 {
+                continue;
+            }
+            out.mask.data[j] = 1;
+            queue.push_back(j);
+        }
+    }
+    let count = out.mask.count();
+    if count < params.min_pixels {
+        out.mask.data.iter_mut().for_each(|m| *m = 0);
+        return;
+    }
+    // Inscribed radius of every silhouette pixel: distance to the background.
+    let mut inv = Mask {
+        width: depth.width,
+        height: depth.height,
+        data: out.mask.data.iter().map(|&m| (m == 0) as u8).collect(),
+    };
+    dt.compute(&inv);
+    let radius_mm = |i: usize| {
+        (dt.dist2[i].sqrt() as f64) * depth.data[i] as f64 * camera.depth_unit_mm / camera.fx
+    };
+    let pixels: Vec<usize> = (0..w * h).filter(|&i| out.mask.data[i] != 0).collect();
+    let pts: Vec<Vector3<f64>> = pixels.iter().map(|&i| point(depth, camera, i)).collect();
+    let n = pts.len() as f64;
+    let mean = pts.iter().sum::<Vector3<f64>>() / n;
+    let cov = pts
+        .iter()
+        .map(|p| (p - mean) * (p - mean).transpose())
+        .sum::<Matrix3<f64>>()
+        / n;
+    let eig = SymmetricEigen::new(cov);
+    let axis = eig.eigenvectors.column(eig.eigenvalues.imax()).into_owned();
+    let t: Vec<f64> = pts.iter().map(|p| (p - mean).dot(&axis)).collect();
+    let (t_min, t_max) = t
+        .iter()
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &x| {
+            (a.min(x), b.max(x))
+        });
+    let widest = |keep: &dyn Fn(f64) -> bool| -> Option<(usize, f64)> {
+        (0..pixels.len())
+            .filter(|&k| keep(t[k]))
+            .map(|k| (k, radius_mm(pixels[k])))
+            .max_by(|a, b| a.1.total_cmp(&b.1))
+    };
+    let (palm_k, palm_r, forearm_dir) = if t_max - t_min <= params.max_hand_length {
+        let (k, r) = widest(&|_| true).unwrap_or((0, 0.0));
+        (k, r, None)
+    } else {
+        // A forearm is attached. Fingers or a fist end the hand smoothly while the forearm is
+        // cut abruptly by the growth volume or the image: the end whose last 40 mm hold the
+        // thinner inscribed circle is the hand.
+        let r_lo = widest(&|x| x < t_min + 40.0).map_or(0.0, |w| w.1);
+        let r_hi = widest(&|x| x > t_max - 40.0).map_or(0.0, |w| w.1);
+        let (hand_lo, dir) = if r_lo <= r_hi {
+            (true, axis)
+        } else {
+            (false, -axis)
+        };
+        let reach = params.max_hand_length * 0.65;
+        let near_hand = move |x: f64| {
+            if hand_lo {
+                x < t_min + reach
+            } else {
+                x > t_max - reach
+            }
+        };
+        let (k, r) = widest(&near_hand).unwrap_or((0, 0.0));
+        (k, r, Some(dir))
+    };
+    let palm = pts[palm_k];
+    if let Some(dir) = forearm_dir {
+        let cut = (params.cut_palm_radii * palm_r).max(40.0);
+        for (k, &i) in pixels.iter().enumerate() {
+            if (pts[k] - palm).dot(&dir) > cut {
+                out.mask.data[i] = 0;
+            }
+        }
+    }
+    inv.data.clear();
+    out.count = out.mask.count();
+    out.palm_center = Some(palm);
+}
+
+/// Parameters of the wristband segmentation (ANCHOR-FACTS §5.6; OpenCV HSV ranges).
+#[derive(Clone, Debug)]
+pub struct WristbandParams {
+    /// Hue range of the band, OpenCV scale [0, 180).
+    pub hue: [u8; 2],
+    /// Saturation range.
+    pub saturation: [u8; 2],
+    /// Value range.
+    pub value: [u8; 2],
+    /// Half-width of the depth slab around the band (mm).
+    pub depth_range: f64,
+    /// Radius of the crop sphere (mm).
+    pub crop_radius: f64,
+    /// Crop sphere center offset from the band center along the axis (mm): 150 − 10 in hmodel.
+    pub crop_offset: f64,
+    /// Minimum band size (px).
+    pub min_band_pixels: usize,
+}
+
+impl Default for WristbandParams {
+    fn default() -> Self {
+        Self {
+            hue: [94, 120],
+            saturation: [111, 255],
+            value: [37, 255],
+            depth_range: 150.0,
+            crop_radius: 150.0,
+            crop_offset: 140.0,
+            min_band_pixels: 40,
+        }
+    }
+}
+
+/// RGB → OpenCV 8-bit HSV (H in [0, 180), S and V in [0, 255]).
+pub fn rgb_to_hsv(rgb: [u8; 3]) -> [u8; 3] {
+    let [r, g, b] = rgb.map(|c| c as f64);
+    let max = r.max(g).max(b);
+    let min = r.min(g).min(b);
+    let delta = max - min;
+    let s = if max > 0.0 { 255.0 * delta / max } else { 0.0 };
+    let mut hdeg = if delta == 0.0 {
+        0.0
+    } else if max == r {
+        60.0 * (g - b) / delta
+    } else if max == g {
+        120.0 + 60.0 * (b - r) / delta
+    } else {
+        240.0 + 60.0 * (r - g) / delta
+    };
+    if hdeg < 0.0 {
+        hdeg += 360.0;
+    }
+    [
+        ((hdeg / 2.0).round() as u32 % 180) as u8,
+        s.round() as u8,
+        max as u8,
+    ]
+}
+
+/// Wristband segmentation (Fig. 2.5): band pixels by HSV threshold, the largest 4-connected band
+/// component, the depth slab around the band's mean depth, the forearm axis as the principal
+/// direction of slab points within 100 mm of the band center (oriented toward the hand), and the
+/// crop sphere ahead of the band. Band pixels themselves are excluded from the silhouette.
+pub fn segment_wristband(
+    depth: &DepthImage,
+    color: &ColorImage,
+    camera: &Camera,
+    params: &WristbandParams,
+    out: &mut HandSegment,
+) {
+    let (w, h) = (depth.width as usize, depth.height as usize);
+    out.mask = Mask::zeros(depth.width, depth.height);
+    out.count = 0;
+    out.palm_center = None;
+    out.wristband = None;
+    if color.width != depth.width || color.height != depth.height {
+        return;
+    }
+    let in_range = |v: u8, r: [u8; 2]| v >= r[0] && v <= r[1];
+    let band: Vec<bool> = (0..w * h)
+        .map(|i| {
+            let [hh, s, v] = rgb_to_hsv(color.get((i % w) as u32, (i / w) as u32));
+            in_range(hh, params.hue) && in_range(s, params.saturation) && in_range(v, params.value)
+        })
+        .collect();
+    // Largest 4-connected band component.
+    let mut label = vec![0u32; w * h];
+    let (mut best_label, mut best_size, mut next) = (0u32, 0usize, 1u32);
+    let mut stack = Vec::new();
+    for s in 0..w * h {
+        if !band[s] || label[s] != 0 {
+            continue;
+        }
+        let mut size = 0;
+        stack.push(s);
+        label[s] = next;
+        while let Some(i) = stack.pop() {
+            size += 1;
+            let (u, v) = (i % w, i / w);
+            let nbrs = [
+                (u > 0).then(|| i - 1),
+                (u + 1 < w).then(|| i + 1),
+                (v > 0).then(|| i - w),
+                (v + 1 < h).then(|| i + w),
+            ];
+            for j in nbrs.into_iter().flatten() {
+                if band[j] && label[j] == 0 {
+                    label[j] = next;
+                    stack.push(j);
+                }
+            }
+        }
+        if size > best_size {
+            best_size = size;
+            best_label = next;
+        }
+        next += 1;
+    }
+    if best_size < params.min_band_pixels {
+        return;
+    }
+    let band_px: Vec<usize> = (0..w * h)
+        .filter(|&i| label[i] == best_label && depth.data[i] != 0)
+        .collect();
+    if band_px.is_empty() {
+        return;
+    }
+    let center = band_px
+        .iter()
+        .map(|&i| point(depth, camera, i))
+        .sum::<Vector3<f64>>()
+        / band_px.len() as f64;
+    let wrist_depth = center.z;
+    let slab = |i: usize| {
+        depth.data[i] != 0 && ((depth.data[i] as f64) - wrist_depth).abs() <= params.depth_range
+    };
+    let mut cov = Matrix3::zeros();
+    let mut mean = Vector3::zeros();
+    let mut n = 0.0;
+    for i in (0..w * h).filter(|&i| slab(i)) {
+        let p = point(depth, camera, i);
+        if (p - center).norm() < 100.0 {
+            mean += p;
+            cov += p * p.transpose();
+            n += 1.0;
+        }
+    }
+    if n < 3.0 {
+        return;
+    }
+    mean /= n;
+    cov = cov / n - mean * mean.transpose();
+    let eig = SymmetricEigen::new(cov);
+    let k = eig.eigenvalues.imax();
+    let mut dir = eig.eigenvectors.column(k).into_owned().normalize();
+    // Orient toward the hand: the side holding more non-band slab points.
+    let balance: f64 = (0..w * h)
+        .filter(|&i| slab(i) && label[i] != best_label)
+        .map(|i| (point(depth, camera, i) - center).dot(&dir).signum())
+        .sum();
+    if balance < 0.0 {
+        dir = -dir;
+    }
+    let crop_c = center + dir * params.crop_offset;
+    let r2 = params.crop_radius * params.crop_radius;
+    for (i, &l) in label.iter().enumerate() {
+        if slab(i)
+            && l != best_label
+            && (point(depth, camera, i) - crop_c).norm_squared() <= r2
+            && (point(depth, camera, i) - center).dot(&dir) > 0.0
+        {
+            out.mask.data[i] = 1;
+        }
+    }
+    out.count = out.mask.count();
+    out.wristband = Some((center, dir));
+    if out.count > 0 {
+        let c = (0..w * h)
+            .filter(|&i| out.mask.data[i] != 0)
+            .map(|i| point(depth, camera, i))
+            .sum::<Vector3<f64>>()
+            / out.count as f64;
+        out.palm_center = Some(c);
+    }
+}

@@ -1,0 +1,114 @@
+//! Issue 3: sequence I/O round trips and bad input (missing camera fields, wrong image sizes,
+//! truncated files, bad ground-truth lines) give clear errors, never panics.
+
+use std::path::PathBuf;
+
+use sensor_io::io::{create_sequence, open_sequence, write_depth_png};
+use sensor_io::record::HandRecord;
+use sensor_io::{Camera, ColorImage, DepthImage, Frame};
+
+fn tmp(name: &str) -> PathBuf {
+    let d = std::env::temp_dir().join(format!("hands-seq-{}-{name}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&d);
+    d
+}
+
+fn frames(cam: &Camera, n: usize) -> Vec<(Frame, HandRecord)> {
+    (0..n)
+        .map(|k| {
+            let mut depth = DepthImage::zeros(cam.width, cam.height);
+            for (i, d) in depth.data.iter_mut().enumerate() {
+                *d = ((i * 7 + k * 13) % 3000) as u16;
+            }
+            let mut color = ColorImage::zeros(cam.width, cam.height);
+            color
+                .data
+                .iter_mut()
+                .enumerate()
+                .for_each(|(i, c)| *c = (i % 251) as u8);
+            let mut rec = HandRecord {
+                frame: k as u64,
+                timestamp: k as f64 / 60.0,
+                ..Default::default()
+            };
+            rec.pose.insert("index_mcp_flex".into(), 0.1 * k as f64);
+            rec.keypoints = vec![[1.0, 2.0, 300.0 + k as f64]; 21];
+            (
+                Frame {
+                    index: k as u64,
+                    timestamp: rec.timestamp,
+                    depth,
+                    color: Some(color),
+                },
+                rec,
+            )
+        })
+        .collect()
+}
+
+#[test]
+fn folder_round_trip() {
+    let cam = Camera::new("test", 16, 12, 20.0, 21.0, 8.0, 6.0).expect("camera");
+    let dir = tmp("folder");
+    let input = frames(&cam, 3);
+    let mut w = create_sequence(&dir, &cam).expect("create");
+    for (f, r) in &input {
+        w.write(f, Some(r)).expect("write");
+    }
+    w.finish().expect("finish");
+    let mut r = open_sequence(&dir).expect("open");
+    assert_eq!(r.camera(), &cam);
+    assert_eq!(r.len(), Some(3));
+    for (f, rec) in &input {
+        let (g, grec) = r.next_frame().expect("frame").expect("ok");
+        assert_eq!(&g.depth, &f.depth);
+        assert_eq!(&g.color, &f.color);
+        assert_eq!(grec.as_ref(), Some(rec));
+    }
+    assert!(r.next_frame().is_none());
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn folder_bad_inputs_are_named() {
+    let cam = Camera::new("test", 16, 12, 20.0, 21.0, 8.0, 6.0).expect("camera");
+    let dir = tmp("bad");
+    let mut w = create_sequence(&dir, &cam).expect("create");
+    for (f, r) in &frames(&cam, 2) {
+        w.write(f, Some(r)).expect("write");
+    }
+    w.finish().expect("finish");
+    // Wrong image size.
+    write_depth_png(&dir.join("depth/000001.png"), &DepthImage::zeros(8, 8)).expect("w");
+    let mut r = open_sequence(&dir).expect("open");
+    assert!(r.next_frame().expect("f0").is_ok());
+    let err = r.next_frame().expect("f1").expect_err("size");
+    assert!(err.to_string().contains("000001.png"), "{err}");
+    // Missing camera field.
+    std::fs::write(
+        dir.join("camera.json"),
+        r#"{"width": 16, "height": 12, "fx": 20, "cx": 8, "cy": 6}"#,
+    )
+    .expect("w");
+    let err = open_sequence(&dir).err().expect("missing fy");
+    assert!(err.to_string().contains("fy"), "{err}");
+    // Corrupt ground truth line.
+    std::fs::write(
+        dir.join("camera.json"),
+        serde_json::to_string(&cam).expect("json"),
+    )
+    .expect("w");
+    std::fs::write(
+        dir.join("groundtruth.jsonl"),
+        "{\"frame\": 0, \"timestamp\": 0}\n{not json\n",
+    )
+    .expect("w");
+    write_depth_png(&dir.join("depth/000001.png"), &DepthImage::zeros(16, 12)).expect("w");
+    let mut r = open_sequence(&dir).expect("open");
+    assert!(r.next_frame().expect("f0").is_ok());
+    let err = r.next_frame().expect("f1").expect_err("gt");
+    assert!(err.to_string().contains("line 2"), "{err}");
+    // Not a sequence at all.
+    assert!(open_sequence(&dir.join("nope")).is_err());
+    let _ = std::fs::remove_dir_all(&dir);
+}
