@@ -2,11 +2,16 @@
 //! MCAP format, behind one streaming reader/writer interface.
 
 mod folder;
+mod mcap_seq;
 mod png;
 
 use std::path::Path;
 
 pub use folder::{read_camera_json, FolderReader, FolderWriter};
+pub use mcap_seq::{
+    McapReader, McapWriter, CALIBRATION_TOPIC, COLOR_TOPIC, DEPTH_TOPIC, GROUNDTRUTH_TOPIC,
+    TRACK_TOPIC,
+};
 pub use png::{read_color_png, read_depth_png, write_atomic, write_color_png, write_depth_png};
 
 use crate::camera::Camera;
@@ -38,10 +43,22 @@ pub trait SequenceWriter {
 
 /// Open a sequence: an `.mcap` file or a folder.
 pub fn open_sequence(path: &Path) -> Result<Box<dyn SequenceReader>> {
+    if is_mcap(path) {
+        return Ok(Box::new(McapReader::open(path)?));
+    }
     Ok(Box::new(FolderReader::open(path)?))
 }
 
 /// Create a sequence writer: `.mcap` paths write MCAP, any other path a folder.
 pub fn create_sequence(path: &Path, camera: &Camera) -> Result<Box<dyn SequenceWriter>> {
+    if is_mcap(path) {
+        return Ok(Box::new(McapWriter::create(path, camera)?));
+    }
     Ok(Box::new(FolderWriter::create(path, camera)?))
+}
+
+/// Whether a path names an MCAP file (by extension).
+pub fn is_mcap(path: &Path) -> bool {
+    path.extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("mcap"))
 }
