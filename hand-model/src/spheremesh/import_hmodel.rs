@@ -199,11 +199,23 @@ struct DofSpec {
 }
 
 const fn rot(theta: usize, phalange: usize, axis: usize, lo: f64, hi: f64) -> DofSpec {
-    DofSpec { theta, phalange, kind: DofKind::Rotation, axis, limits: Some([lo, hi]) }
+    DofSpec {
+        theta,
+        phalange,
+        kind: DofKind::Rotation,
+        axis,
+        limits: Some([lo, hi]),
+    }
 }
 
 const fn global(theta: usize, kind: DofKind, axis: usize) -> DofSpec {
-    DofSpec { theta, phalange: 17, kind, axis, limits: None }
+    DofSpec {
+        theta,
+        phalange: 17,
+        kind,
+        axis,
+        limits: None,
+    }
 }
 
 /// ANCHOR-FACTS §1.3 (honline limits; the hmodel thumb IP limit is patched in `dof_specs`).
@@ -301,15 +313,22 @@ const SPHERES: [(&str, usize, Role); 39] = [
 const HMODEL_SPHERE_33: (&str, usize, Role) = ("thumb_fold", 1, Role::Attached);
 
 /// Weights of honline's derived `thumb_membrane_middle` (`Model::update_centers`).
-const THUMB_MEMBRANE_MIDDLE: [(&str, f64); 3] =
-    [("palm_thumb", 0.4), ("thumb_membrane_left", 0.3), ("thumb_base", 0.3)];
+const THUMB_MEMBRANE_MIDDLE: [(&str, f64); 3] = [
+    ("palm_thumb", 0.4),
+    ("thumb_membrane_left", 0.3),
+    ("thumb_base", 0.3),
+];
 
 /// Block → phalange maps (honline `setup_blockid_to_phalangeid_map`, hmodel
 /// `setup_blockid_to_jointid_map` translated to phalange ids).
-const HONLINE_BLOCK_PHALANGE: [usize; 31] =
-    [6, 5, 4, 9, 8, 7, 12, 11, 10, 15, 14, 13, 3, 2, 1, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 3, 16, 16, 0];
-const HMODEL_BLOCK_PHALANGE: [usize; 30] =
-    [6, 5, 4, 9, 8, 7, 12, 11, 10, 15, 14, 13, 3, 2, 1, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 1, 3, 16, 16];
+const HONLINE_BLOCK_PHALANGE: [usize; 31] = [
+    6, 5, 4, 9, 8, 7, 12, 11, 10, 15, 14, 13, 3, 2, 1, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 3, 16,
+    16, 0,
+];
+const HMODEL_BLOCK_PHALANGE: [usize; 30] = [
+    6, 5, 4, 9, 8, 7, 12, 11, 10, 15, 14, 13, 3, 2, 1, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 1, 3, 16,
+    16,
+];
 
 fn sphere_table(variant: HmodelVariant) -> Vec<(&'static str, usize, Role)> {
     let mut t: Vec<_> = SPHERES[..variant.num_spheres()].to_vec();
@@ -340,13 +359,23 @@ struct NumberFile<'a> {
 }
 
 fn read_text(path: &Path) -> Result<String> {
-    std::fs::read_to_string(path).map_err(|source| ModelError::Io { file: path.to_path_buf(), source })
+    std::fs::read_to_string(path).map_err(|source| ModelError::Io {
+        file: path.to_path_buf(),
+        source,
+    })
 }
 
 impl<'a> NumberFile<'a> {
     fn new(path: PathBuf, text: &'a str) -> Self {
-        let tokens = text.split(|c: char| c.is_whitespace() || c == ',').filter(|s| !s.is_empty()).collect();
-        Self { path, tokens, pos: 0 }
+        let tokens = text
+            .split(|c: char| c.is_whitespace() || c == ',')
+            .filter(|s| !s.is_empty())
+            .collect();
+        Self {
+            path,
+            tokens,
+            pos: 0,
+        }
     }
 
     fn err(&self, field: &str, index: Option<usize>, reason: impl Into<String>) -> ModelError {
@@ -359,8 +388,13 @@ impl<'a> NumberFile<'a> {
             return Err(self.err("count", None, "empty file: expected a count"));
         };
         self.pos = 1;
-        tok.parse::<usize>()
-            .map_err(|_| self.err("count", None, format!("`{tok}` is not a valid count (a non-negative integer)")))
+        tok.parse::<usize>().map_err(|_| {
+            self.err(
+                "count",
+                None,
+                format!("`{tok}` is not a valid count (a non-negative integer)"),
+            )
+        })
     }
 
     /// Check that `count` entries of `per` numbers follow (no allocation from untrusted counts).
@@ -381,23 +415,39 @@ impl<'a> NumberFile<'a> {
     }
 
     fn next_token(&mut self, field: &str, index: usize) -> Result<&'a str> {
-        let tok = self.tokens.get(self.pos).copied().ok_or_else(|| self.err(field, Some(index), "unexpected end of file"))?;
+        let tok = self
+            .tokens
+            .get(self.pos)
+            .copied()
+            .ok_or_else(|| self.err(field, Some(index), "unexpected end of file"))?;
         self.pos += 1;
         Ok(tok)
     }
 
     fn float(&mut self, field: &str, index: usize) -> Result<f64> {
         let tok = self.next_token(field, index)?;
-        let v = tok.parse::<f64>().map_err(|_| self.err(field, Some(index), format!("`{tok}` is not a number")))?;
+        let v = tok
+            .parse::<f64>()
+            .map_err(|_| self.err(field, Some(index), format!("`{tok}` is not a number")))?;
         if !v.is_finite() {
-            return Err(self.err(field, Some(index), format!("`{tok}` is not a finite number")));
+            return Err(self.err(
+                field,
+                Some(index),
+                format!("`{tok}` is not a finite number"),
+            ));
         }
         Ok(v)
     }
 
     fn int(&mut self, field: &str, index: usize) -> Result<i64> {
         let tok = self.next_token(field, index)?;
-        tok.parse::<i64>().map_err(|_| self.err(field, Some(index), format!("`{tok}` is not an integer sphere index")))
+        tok.parse::<i64>().map_err(|_| {
+            self.err(
+                field,
+                Some(index),
+                format!("`{tok}` is not an integer sphere index"),
+            )
+        })
     }
 
     /// Refuse numbers after the last entry (the count is then wrong).
@@ -431,7 +481,11 @@ fn read_centers(path: PathBuf) -> Result<Vec<Vector3<f64>>> {
     f.expect_entries("centers", n, 3)?;
     let mut out = Vec::with_capacity(n);
     for i in 0..n {
-        out.push(Vector3::new(f.float("centers", i)?, f.float("centers", i)?, f.float("centers", i)?));
+        out.push(Vector3::new(
+            f.float("centers", i)?,
+            f.float("centers", i)?,
+            f.float("centers", i)?,
+        ));
     }
     f.finish(n)?;
     Ok(out)
@@ -464,13 +518,21 @@ fn read_blocks(path: PathBuf, num_spheres: usize) -> Result<Vec<(usize, usize, O
     f.expect_entries("blocks", n, 3)?;
     let mut out = Vec::with_capacity(n);
     for i in 0..n {
-        let raw = [f.int("blocks", i)?, f.int("blocks", i)?, f.int("blocks", i)?];
+        let raw = [
+            f.int("blocks", i)?,
+            f.int("blocks", i)?,
+            f.int("blocks", i)?,
+        ];
         let pill = raw[2] == PILL_SENTINEL;
         let used = if pill { &raw[..2] } else { &raw[..] };
         let mut idx = [0usize; 3];
         for (k, &v) in used.iter().enumerate() {
             if v < 0 || v as u64 >= num_spheres as u64 {
-                let what = if v == PILL_SENTINEL { " (the pill marker is only allowed third)" } else { "" };
+                let what = if v == PILL_SENTINEL {
+                    " (the pill marker is only allowed third)"
+                } else {
+                    ""
+                };
                 return Err(f.err(
                     "blocks",
                     Some(i),
@@ -507,7 +569,10 @@ fn read_transforms(path: PathBuf) -> Result<Vec<Rigid3>> {
         return Err(f.err(
             "count",
             None,
-            format!("{n} transforms, expected {} (one per phalange; hmodel writes 19)", PHALANGES.len()),
+            format!(
+                "{n} transforms, expected {} (one per phalange; hmodel writes 19)",
+                PHALANGES.len()
+            ),
         ));
     }
     f.expect_entries("transforms", n, 16)?;
@@ -517,16 +582,19 @@ fn read_transforms(path: PathBuf) -> Result<Vec<Rigid3>> {
         for v in &mut cols {
             *v = f.float("transforms", i)?;
         }
-        if i >= PHALANGES.len() {
+        let Some(&(_, phalange, _)) = PHALANGES.get(i) else {
             continue; // hmodel's unused 19th transform
-        }
+        };
         let m = Matrix4::from_column_slice(&cols);
-        let last_row_ok = (m[(3, 0)].abs() + m[(3, 1)].abs() + m[(3, 2)].abs() + (m[(3, 3)] - 1.0).abs()) < 1e-6;
+        let last_row_ok =
+            (m[(3, 0)].abs() + m[(3, 1)].abs() + m[(3, 2)].abs() + (m[(3, 3)] - 1.0).abs()) < 1e-6;
         if !last_row_ok {
             return Err(f.err(
                 "transforms",
                 Some(i),
-                format!("the last row must be (0 0 0 1) in a column-major rigid transform ({})", PHALANGES[i].1),
+                format!(
+                    "the last row must be (0 0 0 1) in a column-major rigid transform ({phalange})"
+                ),
             ));
         }
         let r = m.fixed_view::<3, 3>(0, 0).into_owned();
@@ -534,7 +602,7 @@ fn read_transforms(path: PathBuf) -> Result<Vec<Rigid3>> {
             return Err(f.err(
                 "transforms",
                 Some(i),
-                format!("the rotation part is not a rotation ({})", PHALANGES[i].1),
+                format!("the rotation part is not a rotation ({phalange})"),
             ));
         };
         out.push(Rigid3::new(r, m.fixed_view::<3, 1>(0, 3).into_owned()));
@@ -551,7 +619,10 @@ fn read_raw(dir: &Path) -> Result<RawModel> {
             c_path,
             "count",
             None,
-            format!("{} spheres: expected 38 (hmodel) or 39 (honline)", centers.len()),
+            format!(
+                "{} spheres: expected 38 (hmodel) or 39 (honline)",
+                centers.len()
+            ),
         ));
     }
     let radii = read_radii(dir.join("R.txt"))?;
@@ -560,20 +631,36 @@ fn read_raw(dir: &Path) -> Result<RawModel> {
             dir.join("R.txt"),
             "count",
             None,
-            format!("{} radii for {} centers in C.txt", radii.len(), centers.len()),
+            format!(
+                "{} radii for {} centers in C.txt",
+                radii.len(),
+                centers.len()
+            ),
         ));
     }
     let blocks = read_blocks(dir.join("B.txt"), centers.len())?;
     let transforms = read_transforms(dir.join("I.txt"))?;
-    Ok(RawModel { centers, radii, blocks, transforms })
+    Ok(RawModel {
+        centers,
+        radii,
+        blocks,
+        transforms,
+    })
 }
 
 // ------------------------------------------------------------------------------------------------
 // Building the template.
 
 /// Build the skeleton of a variant from the 18 rest transforms (phalange order).
-fn build_skeleton(variant: HmodelVariant, transforms: &[Rigid3], source: &Path) -> Result<Skeleton> {
-    let specs: Vec<&DofSpec> = DOFS.iter().filter(|d| variant == HmodelVariant::Honline || d.theta < 29).collect();
+fn build_skeleton(
+    variant: HmodelVariant,
+    transforms: &[Rigid3],
+    source: &Path,
+) -> Result<Skeleton> {
+    let specs: Vec<&DofSpec> = DOFS
+        .iter()
+        .filter(|d| variant == HmodelVariant::Honline || d.theta < 29)
+        .collect();
     let mut bones: Vec<Bone> = BONE_ORDER
         .iter()
         .map(|&p| {
@@ -665,8 +752,14 @@ fn reindex(block: (usize, usize, Option<usize>), radii: &[f64]) -> Element {
 
 fn build_template(raw: &RawModel, dir: &Path) -> Result<SphereMeshTemplate> {
     let c_path = dir.join("C.txt");
-    let variant = HmodelVariant::from_sphere_count(raw.centers.len())
-        .ok_or_else(|| ModelError::field(&c_path, "count", None, "expected 38 (hmodel) or 39 (honline) spheres"))?;
+    let variant = HmodelVariant::from_sphere_count(raw.centers.len()).ok_or_else(|| {
+        ModelError::field(
+            &c_path,
+            "count",
+            None,
+            "expected 38 (hmodel) or 39 (honline) spheres",
+        )
+    })?;
     let skeleton = build_skeleton(variant, &raw.transforms, &dir.join("I.txt"))?;
     let globals = skeleton.rest_globals();
     let table = sphere_table(variant);
@@ -676,22 +769,41 @@ fn build_template(raw: &RawModel, dir: &Path) -> Result<SphereMeshTemplate> {
     for (i, &(name, phalange, role)) in table.iter().enumerate() {
         let bone = bone_of_phalange(phalange);
         let attachment = match role {
-            Role::Center => Attachment::Bone { bone, offset: Vector3::zeros() },
+            Role::Center => Attachment::Bone {
+                bone,
+                offset: Vector3::zeros(),
+            },
             Role::Attached => {
                 let g = &globals[bone];
-                Attachment::Bone { bone, offset: g.rotation.transpose() * (raw.centers[i] - g.translation) }
+                Attachment::Bone {
+                    bone,
+                    offset: g.rotation.transpose() * (raw.centers[i] - g.translation),
+                }
             }
             Role::Derived => Attachment::Blend {
-                parts: THUMB_MEMBRANE_MIDDLE.iter().map(|&(n, w)| (index.get(n).copied().unwrap_or(0), w)).collect(),
+                parts: THUMB_MEMBRANE_MIDDLE
+                    .iter()
+                    .map(|&(n, w)| (index.get(n).copied().unwrap_or(0), w))
+                    .collect(),
             },
         };
-        let radius = if role == Role::Derived { 0.0 } else { raw.radii[i] };
-        spheres.push(SphereDef { name: name.to_string(), attachment, radius });
+        let radius = if role == Role::Derived {
+            0.0
+        } else {
+            raw.radii[i]
+        };
+        spheres.push(SphereDef {
+            name: name.to_string(),
+            attachment,
+            radius,
+        });
     }
     if variant == HmodelVariant::Honline {
         // The thumb rewrite of honline's `Model::initialize_offsets` (ANCHOR-FACTS §2.3).
         for name in ["thumb_membrane_left", "thumb_top", "thumb_additional"] {
-            if let Some(Attachment::Bone { offset, .. }) = index.get(name).map(|&i| &mut spheres[i].attachment) {
+            if let Some(Attachment::Bone { offset, .. }) =
+                index.get(name).map(|&i| &mut spheres[i].attachment)
+            {
                 if name == "thumb_membrane_left" {
                     *offset = Vector3::new(0.0, 12.0, 0.0);
                 } else {
@@ -735,7 +847,11 @@ fn build_template(raw: &RawModel, dir: &Path) -> Result<SphereMeshTemplate> {
         let bone = if use_map {
             bone_of_phalange(map[k])
         } else {
-            let bones: Vec<usize> = element.spheres().iter().flat_map(|&s| sphere_bone(s as usize)).collect();
+            let bones: Vec<usize> = element
+                .spheres()
+                .iter()
+                .flat_map(|&s| sphere_bone(s as usize))
+                .collect();
             common_ancestor(&skeleton, &bones)
         };
         elements.push(ElementDef { element, bone });
@@ -743,16 +859,26 @@ fn build_template(raw: &RawModel, dir: &Path) -> Result<SphereMeshTemplate> {
 
     let mut keypoints = Vec::with_capacity(21);
     let bone = |name: &str| skeleton.bone_index(name).unwrap_or(0);
-    keypoints.push(KeypointDef::Joint { bone: bone("wrist") });
+    keypoints.push(KeypointDef::Joint {
+        bone: bone("wrist"),
+    });
     for digit in ["thumb", "index", "middle", "ring", "pinky"] {
         for k in 1..=3 {
-            keypoints.push(KeypointDef::Joint { bone: bone(&format!("{digit}_{k}")) });
+            keypoints.push(KeypointDef::Joint {
+                bone: bone(&format!("{digit}_{k}")),
+            });
         }
         let sphere = index.get(digit_tip(digit)).copied().unwrap_or(0);
-        keypoints.push(KeypointDef::Tip { bone: bone(&format!("{digit}_3")), sphere });
+        keypoints.push(KeypointDef::Tip {
+            bone: bone(&format!("{digit}_3")),
+            sphere,
+        });
     }
 
-    let folder = dir.file_name().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default();
+    let folder = dir
+        .file_name()
+        .map(|s| s.to_string_lossy().into_owned())
+        .unwrap_or_default();
     let template = SphereMeshTemplate {
         name: format!("{} model ({folder})", variant.label()),
         handedness: Handedness::Left,
@@ -785,7 +911,12 @@ pub fn detect_hmodel_variant(dir: impl AsRef<Path>) -> Result<HmodelVariant> {
     let mut f = NumberFile::new(path.clone(), &text);
     let n = f.count()?;
     HmodelVariant::from_sphere_count(n).ok_or_else(|| {
-        ModelError::field(path, "count", None, format!("{n} spheres: expected 38 (hmodel) or 39 (honline)"))
+        ModelError::field(
+            path,
+            "count",
+            None,
+            format!("{n} spheres: expected 38 (hmodel) or 39 (honline)"),
+        )
     })
 }
 
@@ -796,12 +927,17 @@ pub fn pose_from_honline_theta(template: &SphereMeshTemplate, theta: &[f64]) -> 
     if theta.len() != 29 && theta.len() != 34 {
         return Err(ModelError::InvalidArgument {
             name: "theta",
-            reason: format!("{} values: expected 29 (hmodel) or 34 (honline)", theta.len()),
+            reason: format!(
+                "{} values: expected 29 (hmodel) or 34 (honline)",
+                theta.len()
+            ),
         });
     }
     let mut pose = Pose::zeros(&template.skeleton);
     for (i, &v) in theta.iter().enumerate() {
-        let Some(name) = HONLINE_THETA_DOFS[i] else { continue };
+        let Some(name) = HONLINE_THETA_DOFS[i] else {
+            continue;
+        };
         match template.skeleton.dof_index(name) {
             Some(_) => pose.set(&template.skeleton, name, v)?,
             None if v == 0.0 => {}
@@ -863,15 +999,20 @@ pub fn export_hmodel_dir(template: &SphereMeshTemplate, dir: impl AsRef<Path>) -
             src,
             "spheres",
             None,
-            format!("{} spheres; the {} format holds exactly {}", t.spheres.len(), variant.label(), table.len()),
+            format!(
+                "{} spheres; the {} format holds exactly {}",
+                t.spheres.len(),
+                variant.label(),
+                table.len()
+            ),
         ));
     }
     // file index of each template sphere
     let mut file_index = vec![0usize; t.spheres.len()];
     for (fi, &(name, _, _)) in table.iter().enumerate() {
-        let ti = t
-            .sphere_index(name)
-            .ok_or_else(|| ModelError::field(src, "spheres", None, format!("missing sphere `{name}`")))?;
+        let ti = t.sphere_index(name).ok_or_else(|| {
+            ModelError::field(src, "spheres", None, format!("missing sphere `{name}`"))
+        })?;
         file_index[ti] = fi;
     }
     let rest = t.rest_spheres();
@@ -887,7 +1028,9 @@ pub fn export_hmodel_dir(template: &SphereMeshTemplate, dir: impl AsRef<Path>) -
             t.skeleton
                 .bone_index(name)
                 .map(|b| t.skeleton.bones()[b].rest)
-                .ok_or_else(|| ModelError::field(src, "bones", None, format!("missing bone `{name}`")))
+                .ok_or_else(|| {
+                    ModelError::field(src, "bones", None, format!("missing bone `{name}`"))
+                })
         })
         .collect::<Result<_>>()?;
 
@@ -907,7 +1050,12 @@ pub fn export_hmodel_dir(template: &SphereMeshTemplate, dir: impl AsRef<Path>) -
     r.push('\n');
     let mut b = format!("{}\n", t.elements.len());
     for e in &t.elements {
-        let idx: Vec<String> = e.element.spheres().iter().map(|&s| file_index[s as usize].to_string()).collect();
+        let idx: Vec<String> = e
+            .element
+            .spheres()
+            .iter()
+            .map(|&s| file_index[s as usize].to_string())
+            .collect();
         match e.element {
             Element::Pill(_) => b.push_str(&format!("{} {} {PILL_SENTINEL}\n", idx[0], idx[1])),
             Element::Wedge(_) => b.push_str(&format!("{} {} {}\n", idx[0], idx[1], idx[2])),
@@ -927,13 +1075,15 @@ pub fn export_hmodel_dir(template: &SphereMeshTemplate, dir: impl AsRef<Path>) -
         }
         i.push('\n');
     }
-    std::fs::create_dir_all(dir).map_err(|source| ModelError::Io { file: dir.to_path_buf(), source })?;
+    std::fs::create_dir_all(dir).map_err(|source| ModelError::Io {
+        file: dir.to_path_buf(),
+        source,
+    })?;
     for (name, text) in [("C.txt", c), ("R.txt", r), ("B.txt", b), ("I.txt", i)] {
         write_atomic(&dir.join(name), text.as_bytes())?;
     }
     Ok(())
 }
-
 
 #[cfg(test)]
 mod tests {
@@ -958,7 +1108,10 @@ mod tests {
     fn temp_dir(tag: &str) -> PathBuf {
         static N: AtomicUsize = AtomicUsize::new(0);
         let n = N.fetch_add(1, Ordering::Relaxed);
-        let d = std::env::temp_dir().join(format!("hands-hmodel-test-{}-{tag}-{n}", std::process::id()));
+        let d = std::env::temp_dir().join(format!(
+            "hands-hmodel-test-{}-{tag}-{n}",
+            std::process::id()
+        ));
         std::fs::create_dir_all(&d).expect("temp dir");
         d
     }
@@ -990,7 +1143,12 @@ mod tests {
                 continue;
             }
             let err = (s.center - raw.centers[i]).norm();
-            assert!(err < 1e-3, "{name}: rest center {:?} vs C.txt {:?}", s.center, raw.centers[i]);
+            assert!(
+                err < 1e-3,
+                "{name}: rest center {:?} vs C.txt {:?}",
+                s.center,
+                raw.centers[i]
+            );
             assert_eq!(s.radius, raw.radii[i], "{name}: radius");
             max_err = max_err.max(err);
         }
@@ -999,14 +1157,24 @@ mod tests {
 
     #[test]
     fn honline_rest_pose_reproduces_the_files() {
-        let Some(dir) = reference_dir("honline-template-anastasia") else { return };
+        let Some(dir) = reference_dir("honline-template-anastasia") else {
+            return;
+        };
         let t = import_hmodel_dir(&dir).expect("imports");
         assert_eq!(detect_hmodel_variant(&dir).unwrap(), HmodelVariant::Honline);
         assert_eq!(t.handedness, Handedness::Left);
-        assert_eq!((t.spheres.len(), t.elements.len(), t.skeleton.num_dofs()), (39, 31, 33));
+        assert_eq!(
+            (t.spheres.len(), t.elements.len(), t.skeleton.num_dofs()),
+            (39, 31, 33)
+        );
         assert_eq!(t.element_counts(), (16, 15));
         let raw = raw(&dir);
-        let changed = ["thumb_top", "thumb_additional", "thumb_membrane_left", "thumb_membrane_middle"];
+        let changed = [
+            "thumb_top",
+            "thumb_additional",
+            "thumb_membrane_left",
+            "thumb_membrane_middle",
+        ];
         let max_err = check_rest_pose(&t, &raw, &changed);
         println!("honline: max rest-center error vs C.txt {max_err:.2e} mm");
         // The spheres changed by the thumb rewrite, at the values of ANCHOR-FACTS §2.3.
@@ -1024,13 +1192,18 @@ mod tests {
         }
         // The file's own (stale) values of the derived sphere are ignored.
         let i = t.sphere_index("thumb_membrane_middle").unwrap();
-        assert!((raw.centers[i] - Vector3::new(24.1397, 32.040798, -12.74939)).norm() < 1e-6, "comma line parsed");
+        assert!(
+            (raw.centers[i] - Vector3::new(24.1397, 32.040798, -12.74939)).norm() < 1e-6,
+            "comma line parsed"
+        );
         assert!((rest[i].center - raw.centers[i]).norm() > 1.0);
     }
 
     #[test]
     fn honline_offsets_match_the_anchor_table() {
-        let Some(dir) = reference_dir("honline-template-anastasia") else { return };
+        let Some(dir) = reference_dir("honline-template-anastasia") else {
+            return;
+        };
         let t = import_hmodel_dir(&dir).expect("imports");
         // ANCHOR-FACTS §2.3, attachment offsets after the thumb rewrite (3 decimals).
         let table: [(&str, [f64; 3]); 17] = [
@@ -1053,24 +1226,37 @@ mod tests {
             ("wrist_top_right", [-8.117, -4.058, 0.0]),
         ];
         for (name, expected) in table {
-            let Attachment::Bone { offset, .. } = &t.spheres[t.sphere_index(name).unwrap()].attachment else {
+            let Attachment::Bone { offset, .. } =
+                &t.spheres[t.sphere_index(name).unwrap()].attachment
+            else {
                 panic!("{name} is not bone-attached")
             };
-            assert!((offset - Vector3::from(expected)).amax() < 6e-4, "{name}: {offset:?}");
+            assert!(
+                (offset - Vector3::from(expected)).amax() < 6e-4,
+                "{name}: {offset:?}"
+            );
         }
     }
 
     #[test]
     fn hmodel_rest_pose_reproduces_the_files() {
-        let Some(dir) = reference_dir("hmodel-template-anastasia") else { return };
+        let Some(dir) = reference_dir("hmodel-template-anastasia") else {
+            return;
+        };
         let t = import_hmodel_dir(&dir).expect("imports");
         assert_eq!(detect_hmodel_variant(&dir).unwrap(), HmodelVariant::Hmodel);
-        assert_eq!((t.spheres.len(), t.elements.len(), t.skeleton.num_dofs()), (38, 30, 28));
+        assert_eq!(
+            (t.spheres.len(), t.elements.len(), t.skeleton.num_dofs()),
+            (38, 30, 28)
+        );
         // ANCHOR-FACTS §2.2 says 16 pills + 14 wedges; the file holds 15 + 15 (block 14 is a
         // wedge with thumb_fold, block 27 the thumb_top–thumb_additional pill).
         assert_eq!(t.element_counts(), (15, 15));
         assert_eq!(t.spheres[33].name, "thumb_fold");
-        assert_eq!(t.skeleton.bones()[sphere_bone(&t, "thumb_fold")].name, "thumb_1");
+        assert_eq!(
+            t.skeleton.bones()[sphere_bone(&t, "thumb_fold")].name,
+            "thumb_1"
+        );
         let raw = raw(&dir);
         let max_err = check_rest_pose(&t, &raw, &[]);
         println!("hmodel: max rest-center error vs C.txt {max_err:.2e} mm");
@@ -1091,7 +1277,9 @@ mod tests {
     /// 3 decimals it is given with (largest error ≈ 6e-4 mm, i.e. rounding).
     #[test]
     fn honline_initial_pose_matches_reference_fk() {
-        let Some(dir) = reference_dir("honline-template-anastasia") else { return };
+        let Some(dir) = reference_dir("honline-template-anastasia") else {
+            return;
+        };
         let t = import_hmodel_dir(&dir).expect("imports");
         let mut theta = [0.0; 34];
         theta[1] = -50.0;
@@ -1114,7 +1302,11 @@ mod tests {
         for (name, expected) in reference {
             let c = center(&t, &p, name);
             let err = (c - Vector3::from(expected)).norm();
-            println!("{name:>13}: ({:.4}, {:.4}, {:.4})  error {err:.1e} mm", c.x, c.y, c.z);
+            let comp = (c - Vector3::from(expected)).amax();
+            println!(
+                "{name:>13}: ({:.5}, {:.5}, {:.5})  error {err:.1e} mm (max component {comp:.1e})",
+                c.x, c.y, c.z
+            );
             assert!(err < 1e-3, "{name}: {c:?} vs {expected:?}");
         }
     }
@@ -1123,12 +1315,20 @@ mod tests {
     /// moves the tip to +x (away from the middle finger) on the left-hand files.
     #[test]
     fn honline_flexion_and_abduction_signs() {
-        let Some(dir) = reference_dir("honline-template-anastasia") else { return };
+        let Some(dir) = reference_dir("honline-template-anastasia") else {
+            return;
+        };
         let t = import_hmodel_dir(&dir).expect("imports");
         let rest = center(&t, &posed(&t, &[]), "index_top");
-        assert!((rest - Vector3::new(35.2, 120.5, 8.6)).amax() < 0.05, "{rest:?}");
+        assert!(
+            (rest - Vector3::new(35.2, 120.5, 8.6)).amax() < 0.05,
+            "{rest:?}"
+        );
         let flexed = center(&t, &posed(&t, &[("index_mcp_flex", 0.5)]), "index_top");
-        assert!((flexed - Vector3::new(25.7, 114.7, -24.5)).amax() < 0.05, "{flexed:?}");
+        assert!(
+            (flexed - Vector3::new(25.7, 114.7, -24.5)).amax() < 0.05,
+            "{flexed:?}"
+        );
         let abducted = center(&t, &posed(&t, &[("index_mcp_abd", 0.3)]), "index_top");
         assert!(abducted.x > rest.x + 10.0, "{abducted:?}");
         // The twist turns about the bone axis (+y): the next joint, on the axis, stays; the
@@ -1145,7 +1345,9 @@ mod tests {
             ("honline-template-anastasia", &HONLINE_BLOCK_PHALANGE[..]),
             ("hmodel-template-anastasia", &HMODEL_BLOCK_PHALANGE[..]),
         ] {
-            let Some(dir) = reference_dir(name) else { return };
+            let Some(dir) = reference_dir(name) else {
+                return;
+            };
             let t = import_hmodel_dir(&dir).expect("imports");
             let rest_radii: Vec<f64> = t.rest_spheres().iter().map(|s| s.radius).collect();
             for (k, e) in t.elements.iter().enumerate() {
@@ -1156,7 +1358,11 @@ mod tests {
                 for &s in e.element.spheres() {
                     match &t.spheres[s as usize].attachment {
                         Attachment::Bone { bone, .. } => bones.push(*bone),
-                        Attachment::Blend { parts } => bones.extend(parts.iter().map(|&(p, _)| sphere_bone(&t, &t.spheres[p].name))),
+                        Attachment::Blend { parts } => bones.extend(
+                            parts
+                                .iter()
+                                .map(|&(p, _)| sphere_bone(&t, &t.spheres[p].name)),
+                        ),
                     }
                 }
                 let lca = common_ancestor(&t.skeleton, &bones);
@@ -1167,7 +1373,12 @@ mod tests {
                     assert_eq!(lca, e.bone, "{name} block {k}");
                 }
                 // Largest radius first (`Model::reindex`).
-                let r: Vec<f64> = e.element.spheres().iter().map(|&s| rest_radii[s as usize]).collect();
+                let r: Vec<f64> = e
+                    .element
+                    .spheres()
+                    .iter()
+                    .map(|&s| rest_radii[s as usize])
+                    .collect();
                 assert!(r.iter().all(|&x| x <= r[0]), "{name} block {k}: {r:?}");
             }
             // The re-ordered blocks of the ANCHOR-FACTS §2.6 tables.
@@ -1187,14 +1398,25 @@ mod tests {
 
     #[test]
     fn keypoints_of_the_import() {
-        let Some(dir) = reference_dir("honline-template-anastasia") else { return };
+        let Some(dir) = reference_dir("honline-template-anastasia") else {
+            return;
+        };
         let t = import_hmodel_dir(&dir).expect("imports");
         let p = posed(&t, &[]);
         let k = p.keypoints(&t);
         assert_eq!(k[0], Vector3::zeros(), "wrist = wrist bone origin");
-        assert!((k[1] - center(&t, &p, "thumb_base")).norm() < 1e-12, "thumb CMC");
-        assert!((k[5] - center(&t, &p, "index_base")).norm() < 1e-12, "index MCP");
-        assert!((k[7] - center(&t, &p, "index_middle")).norm() < 1e-12, "index DIP");
+        assert!(
+            (k[1] - center(&t, &p, "thumb_base")).norm() < 1e-12,
+            "thumb CMC"
+        );
+        assert!(
+            (k[5] - center(&t, &p, "index_base")).norm() < 1e-12,
+            "index MCP"
+        );
+        assert!(
+            (k[7] - center(&t, &p, "index_middle")).norm() < 1e-12,
+            "index DIP"
+        );
         // Thumb tip: thumb_additional plus its radius along the distal bone, beyond thumb_top's
         // own far surface.
         let t3 = t.skeleton.bone_index("thumb_3").unwrap();
@@ -1210,7 +1432,9 @@ mod tests {
     /// with the mirror for any joint angles.
     #[test]
     fn mirrored_import_is_a_right_hand() {
-        let Some(dir) = reference_dir("honline-template-anastasia") else { return };
+        let Some(dir) = reference_dir("honline-template-anastasia") else {
+            return;
+        };
         let left = import_hmodel_dir(&dir).expect("imports");
         let right = left.mirrored().expect("mirrors");
         assert_eq!(right.handedness, Handedness::Right);
@@ -1233,8 +1457,14 @@ mod tests {
             assert!((a.center.component_mul(&m) - b.center).norm() < 1e-9);
         }
         let rest = right.rest_spheres();
-        assert!(rest[right.sphere_index("thumb_base").unwrap()].center.x < 0.0, "thumb toward −x");
-        assert!(rest[right.sphere_index("index_base").unwrap()].center.x < 0.0, "index on the thumb side");
+        assert!(
+            rest[right.sphere_index("thumb_base").unwrap()].center.x < 0.0,
+            "thumb toward −x"
+        );
+        assert!(
+            rest[right.sphere_index("index_base").unwrap()].center.x < 0.0,
+            "index on the thumb side"
+        );
         assert!(rest[right.sphere_index("pinky_base").unwrap()].center.x > 0.0);
     }
 
@@ -1251,7 +1481,9 @@ mod tests {
     ///   wrist_top_left (sphere 34) has 12.9.
     #[test]
     fn honline_shape_basis_on_the_import() {
-        let Some(dir) = reference_dir("honline-template-anastasia") else { return };
+        let Some(dir) = reference_dir("honline-template-anastasia") else {
+            return;
+        };
         let t = import_hmodel_dir(&dir).expect("imports");
         let basis = ShapeBasis::honline(&t).expect("basis builds");
         assert_eq!(basis.len(), 75);
@@ -1277,10 +1509,21 @@ mod tests {
             }
         }
         let expected: Vec<&str> = vec![
-            "thumb_top_length", "index_base_z", "middle_base_z", "ring_base_z", "pinky_base_z",
-            "wrist_width", "wrist_length", "wrist_width_left", "wrist_top_left_radius",
+            "thumb_top_length",
+            "index_base_z",
+            "middle_base_z",
+            "ring_base_z",
+            "pinky_base_z",
+            "wrist_width",
+            "wrist_length",
+            "wrist_width_left",
+            "wrist_top_left_radius",
         ];
-        assert_eq!(differ.iter().map(|d| d.0).collect::<Vec<_>>(), expected, "{differ:?}");
+        assert_eq!(
+            differ.iter().map(|d| d.0).collect::<Vec<_>>(),
+            expected,
+            "{differ:?}"
+        );
         for (name, a, b) in &differ {
             println!("β {name}: template {a:.5}, §2.5 table {b:.5}");
         }
@@ -1300,15 +1543,24 @@ mod tests {
         }
         let shaped = basis.apply(&t, &beta).expect("applies");
         let (fitted, resid) = basis.fit(&t, &shaped).expect("fits");
-        let err = fitted.iter().zip(&beta).map(|(a, b)| (a - b).abs()).fold(0.0, f64::max);
-        assert!(err < 1e-6 && resid < 1e-6, "β error {err}, residual {resid}");
+        let err = fitted
+            .iter()
+            .zip(&beta)
+            .map(|(a, b)| (a - b).abs())
+            .fold(0.0, f64::max);
+        assert!(
+            err < 1e-6 && resid < 1e-6,
+            "β error {err}, residual {resid}"
+        );
         let (same, resid) = basis.fit(&t, &t).expect("fits");
         assert!(same.iter().zip(&ours).all(|(a, b)| (a - b).abs() < 1e-9) && resid < 1e-9);
     }
 
     #[test]
     fn export_import_round_trips() {
-        let Some(dir) = reference_dir("honline-template-anastasia") else { return };
+        let Some(dir) = reference_dir("honline-template-anastasia") else {
+            return;
+        };
         let t = import_hmodel_dir(&dir).expect("imports");
         let out = temp_dir("honline");
         export_hmodel_dir(&t, &out).expect("exports");
@@ -1330,11 +1582,15 @@ mod tests {
 
     #[test]
     fn hmodel_export_import_round_trips() {
-        let Some(dir) = reference_dir("hmodel-template-anastasia") else { return };
+        let Some(dir) = reference_dir("hmodel-template-anastasia") else {
+            return;
+        };
         let t = import_hmodel_dir(&dir).expect("imports");
         let out = temp_dir("hmodel");
         export_hmodel_dir(&t, &out).expect("exports");
-        assert!(std::fs::read_to_string(out.join("I.txt")).unwrap().starts_with("19\n"));
+        assert!(std::fs::read_to_string(out.join("I.txt"))
+            .unwrap()
+            .starts_with("19\n"));
         let back = import_hmodel_dir(&out).expect("re-imports");
         for (a, b) in t.rest_spheres().iter().zip(&back.rest_spheres()) {
             assert!((a.center - b.center).norm() < 1e-9);
@@ -1352,7 +1608,12 @@ mod tests {
         assert_eq!(detect_hmodel_variant(&out).unwrap(), HmodelVariant::Honline);
         let back = import_hmodel_dir(&out).expect("imports");
         let right = back.mirrored().expect("mirrors");
-        for (i, (a, b)) in d.rest_spheres().iter().zip(&right.rest_spheres()).enumerate() {
+        for (i, (a, b)) in d
+            .rest_spheres()
+            .iter()
+            .zip(&right.rest_spheres())
+            .enumerate()
+        {
             assert!((a.center - b.center).norm() < 1e-9, "{}", d.spheres[i].name);
             assert!((a.radius - b.radius).abs() < 1e-12);
         }
@@ -1373,7 +1634,9 @@ mod tests {
     }
 
     fn refused(dir: &Path) -> String {
-        let e = import_hmodel_dir(dir).expect_err("bad input refused").to_string();
+        let e = import_hmodel_dir(dir)
+            .expect_err("bad input refused")
+            .to_string();
         let _ = std::fs::remove_dir_all(dir);
         e
     }
@@ -1388,24 +1651,38 @@ mod tests {
     fn refuses_bad_files() {
         // Truncated centers.
         let d = valid_folder("trunc");
-        edit(&d, "C.txt", |t| t.split_whitespace().take(60).collect::<Vec<_>>().join(" "));
+        edit(&d, "C.txt", |t| {
+            t.split_whitespace().take(60).collect::<Vec<_>>().join(" ")
+        });
         let e = refused(&d);
-        assert!(e.contains("C.txt") && e.contains("`centers`[19]") && e.contains("truncated"), "{e}");
+        assert!(
+            e.contains("C.txt") && e.contains("`centers`[19]") && e.contains("truncated"),
+            "{e}"
+        );
         // Non-numeric token.
         let d = valid_folder("token");
         edit(&d, "I.txt", |t| replace_token(&t, 40, "0.5x"));
         let e = refused(&d);
-        assert!(e.contains("I.txt") && e.contains("`transforms`[2]") && e.contains("`0.5x`"), "{e}");
+        assert!(
+            e.contains("I.txt") && e.contains("`transforms`[2]") && e.contains("`0.5x`"),
+            "{e}"
+        );
         // NaN.
         let d = valid_folder("nan");
         edit(&d, "C.txt", |t| replace_token(&t, 1 + 3 * 7 + 2, "nan"));
         let e = refused(&d);
-        assert!(e.contains("C.txt") && e.contains("`centers`[7]") && e.contains("finite"), "{e}");
+        assert!(
+            e.contains("C.txt") && e.contains("`centers`[7]") && e.contains("finite"),
+            "{e}"
+        );
         // Wrong count: more numbers than the count.
         let d = valid_folder("count");
         edit(&d, "R.txt", |t| replace_token(&t, 0, "38"));
         let e = refused(&d);
-        assert!(e.contains("R.txt") && e.contains("`count`") && e.contains("wrong count"), "{e}");
+        assert!(
+            e.contains("R.txt") && e.contains("`count`") && e.contains("wrong count"),
+            "{e}"
+        );
         // Counts that disagree between files.
         let d = valid_folder("mismatch");
         edit(&d, "R.txt", |t| {
@@ -1413,7 +1690,10 @@ mod tests {
             format!("38 {}", toks[1..39].join(" "))
         });
         let e = refused(&d);
-        assert!(e.contains("R.txt") && e.contains("38 radii for 39 centers"), "{e}");
+        assert!(
+            e.contains("R.txt") && e.contains("38 radii for 39 centers"),
+            "{e}"
+        );
         // Unsupported sphere count.
         let d = valid_folder("spheres");
         edit(&d, "C.txt", |t| {
@@ -1426,12 +1706,18 @@ mod tests {
         let d = valid_folder("block");
         edit(&d, "B.txt", |t| replace_token(&t, 1 + 3 * 5 + 1, "45"));
         let e = refused(&d);
-        assert!(e.contains("B.txt") && e.contains("`blocks`[5]") && e.contains("45 out of range"), "{e}");
+        assert!(
+            e.contains("B.txt") && e.contains("`blocks`[5]") && e.contains("45 out of range"),
+            "{e}"
+        );
         // The pill marker in the wrong place.
         let d = valid_folder("sentinel");
         edit(&d, "B.txt", |t| replace_token(&t, 1, "32767"));
         let e = refused(&d);
-        assert!(e.contains("`blocks`[0]") && e.contains("only allowed third"), "{e}");
+        assert!(
+            e.contains("`blocks`[0]") && e.contains("only allowed third"),
+            "{e}"
+        );
         // Negative block index and a block repeating a sphere.
         let d = valid_folder("negative");
         edit(&d, "B.txt", |t| replace_token(&t, 4, "-1"));
@@ -1443,7 +1729,10 @@ mod tests {
         let d = valid_folder("radius");
         edit(&d, "R.txt", |t| replace_token(&t, 4, "-2.5"));
         let e = refused(&d);
-        assert!(e.contains("R.txt") && e.contains("`radii`[3]") && e.contains("negative"), "{e}");
+        assert!(
+            e.contains("R.txt") && e.contains("`radii`[3]") && e.contains("negative"),
+            "{e}"
+        );
         // A transposed (row-major) transform.
         let d = valid_folder("transposed");
         edit(&d, "I.txt", |t| {
@@ -1457,7 +1746,10 @@ mod tests {
             toks.join(" ")
         });
         let e = refused(&d);
-        assert!(e.contains("I.txt") && e.contains("`transforms`[1]") && e.contains("column-major"), "{e}");
+        assert!(
+            e.contains("I.txt") && e.contains("`transforms`[1]") && e.contains("column-major"),
+            "{e}"
+        );
         // A scaled rotation.
         let d = valid_folder("scaled");
         edit(&d, "I.txt", |t| replace_token(&t, 1 + 16 * 2, "1.5"));
@@ -1478,7 +1770,9 @@ mod tests {
         edit(&d, "C.txt", |t| replace_token(&t, 0, "thirty-nine"));
         assert!(refused(&d).contains("not a valid count"));
         let d = valid_folder("huge");
-        edit(&d, "C.txt", |t| replace_token(&t, 0, "18446744073709551615"));
+        edit(&d, "C.txt", |t| {
+            replace_token(&t, 0, "18446744073709551615")
+        });
         assert!(refused(&d).contains("truncated"));
     }
 
@@ -1497,7 +1791,10 @@ mod tests {
         theta[6] = 5.0; // unused slot
         theta[14] = 0.4;
         let pose = pose_from_honline_theta(&t, &theta).expect("converts");
-        assert_eq!(pose.values[t.skeleton.dof_index("index_mcp_flex").unwrap()], 0.4);
+        assert_eq!(
+            pose.values[t.skeleton.dof_index("index_mcp_flex").unwrap()],
+            0.4
+        );
         let mut theta = vec![0.0; 34];
         theta[30] = 0.1; // the default template has no twists
         assert!(pose_from_honline_theta(&t, &theta).is_err());

@@ -103,10 +103,17 @@ impl J {
             J::Num(v) => num_text(*v),
             J::Int(v) => v.to_string(),
             J::Str(s) => str_text(s),
-            J::Arr(items) => format!("[{}]", items.iter().map(J::inline).collect::<Vec<_>>().join(", ")),
+            J::Arr(items) => format!(
+                "[{}]",
+                items.iter().map(J::inline).collect::<Vec<_>>().join(", ")
+            ),
             J::Obj(fields) => format!(
                 "{{{}}}",
-                fields.iter().map(|(k, v)| format!("{}: {}", str_text(k), v.inline())).collect::<Vec<_>>().join(", ")
+                fields
+                    .iter()
+                    .map(|(k, v)| format!("{}: {}", str_text(k), v.inline()))
+                    .collect::<Vec<_>>()
+                    .join(", ")
             ),
         }
     }
@@ -150,11 +157,21 @@ fn kind_text(kind: DofKind) -> &'static str {
     }
 }
 
-fn check_finite<'a>(src: &Path, field: &str, index: usize, values: impl IntoIterator<Item = &'a f64>) -> Result<()> {
+fn check_finite<'a>(
+    src: &Path,
+    field: &str,
+    index: usize,
+    values: impl IntoIterator<Item = &'a f64>,
+) -> Result<()> {
     if values.into_iter().all(|v| v.is_finite()) {
         Ok(())
     } else {
-        Err(ModelError::field(src, field, Some(index), "non-finite number (JSON cannot hold it)"))
+        Err(ModelError::field(
+            src,
+            field,
+            Some(index),
+            "non-finite number (JSON cannot hold it)",
+        ))
     }
 }
 
@@ -171,7 +188,12 @@ impl SphereMeshTemplate {
         let bones = skel.bones();
         let dofs = skel.dofs();
         for (i, b) in bones.iter().enumerate() {
-            check_finite(src, "bones.rest", i, b.rest.rotation.iter().chain(b.rest.translation.iter()))?;
+            check_finite(
+                src,
+                "bones.rest",
+                i,
+                b.rest.rotation.iter().chain(b.rest.translation.iter()),
+            )?;
         }
         for (i, d) in dofs.iter().enumerate() {
             check_finite(src, "dofs.axis", i, d.axis.iter())?;
@@ -181,12 +203,26 @@ impl SphereMeshTemplate {
         let mut bones_j = Vec::with_capacity(bones.len());
         for b in bones {
             let r = &b.rest.rotation;
-            let rows = (0..3).map(|i| J::Arr((0..3).map(|j| J::Num(r[(i, j)])).collect())).collect();
+            let rows = (0..3)
+                .map(|i| J::Arr((0..3).map(|j| J::Num(r[(i, j)])).collect()))
+                .collect();
             bones_j.push(J::Obj(vec![
                 ("name", J::str(&b.name)),
-                ("parent", b.parent.map_or(J::Null, |p| J::str(&bones[p].name))),
-                ("rest", J::Obj(vec![("rotation", J::Arr(rows)), ("translation", J::vec3(&b.rest.translation))])),
-                ("dofs", J::Arr(b.dofs.iter().map(|&d| J::str(&dofs[d].name)).collect())),
+                (
+                    "parent",
+                    b.parent.map_or(J::Null, |p| J::str(&bones[p].name)),
+                ),
+                (
+                    "rest",
+                    J::Obj(vec![
+                        ("rotation", J::Arr(rows)),
+                        ("translation", J::vec3(&b.rest.translation)),
+                    ]),
+                ),
+                (
+                    "dofs",
+                    J::Arr(b.dofs.iter().map(|&d| J::str(&dofs[d].name)).collect()),
+                ),
             ]));
         }
         let dofs_j = dofs
@@ -197,7 +233,11 @@ impl SphereMeshTemplate {
                     ("bone", J::str(&bones[d.bone].name)),
                     ("kind", J::str(kind_text(d.kind))),
                     ("axis", J::vec3(&d.axis)),
-                    ("limits", d.limits.map_or(J::Null, |l| J::Arr(vec![J::Num(l[0]), J::Num(l[1])]))),
+                    (
+                        "limits",
+                        d.limits
+                            .map_or(J::Null, |l| J::Arr(vec![J::Num(l[0]), J::Num(l[1])])),
+                    ),
                 ])
             })
             .collect();
@@ -234,7 +274,10 @@ impl SphereMeshTemplate {
                     Element::Pill(s) => ("pill", s.iter().map(name_of).collect()),
                     Element::Wedge(s) => ("wedge", s.iter().map(name_of).collect()),
                 };
-                J::Obj(vec![(key, J::Arr(list)), ("bone", J::str(&bones[e.bone].name))])
+                J::Obj(vec![
+                    (key, J::Arr(list)),
+                    ("bone", J::str(&bones[e.bone].name)),
+                ])
             })
             .collect();
         let keypoints_j = self
@@ -242,7 +285,10 @@ impl SphereMeshTemplate {
             .iter()
             .zip(KEYPOINT_NAMES)
             .map(|(k, name)| match *k {
-                KeypointDef::Joint { bone } => J::Obj(vec![("name", J::str(name)), ("joint", J::str(&bones[bone].name))]),
+                KeypointDef::Joint { bone } => J::Obj(vec![
+                    ("name", J::str(name)),
+                    ("joint", J::str(&bones[bone].name)),
+                ]),
                 KeypointDef::Tip { bone, sphere } => J::Obj(vec![
                     ("name", J::str(name)),
                     ("tip", J::str(&self.spheres[sphere].name)),
@@ -282,7 +328,10 @@ impl SphereMeshTemplate {
     /// Read a template from a JSON file (see [`SphereMeshTemplate::from_json_str`]).
     pub fn load(path: impl AsRef<Path>) -> Result<SphereMeshTemplate> {
         let path = path.as_ref();
-        let text = std::fs::read_to_string(path).map_err(|source| ModelError::Io { file: path.to_path_buf(), source })?;
+        let text = std::fs::read_to_string(path).map_err(|source| ModelError::Io {
+            file: path.to_path_buf(),
+            source,
+        })?;
         Self::from_json_str(&text, path)
     }
 
@@ -294,8 +343,10 @@ impl SphereMeshTemplate {
     /// keypoint list that is not the 21 of DESIGN.md, and anything [`Skeleton::new`] or
     /// [`SphereMeshTemplate::validate`] refuses.
     pub fn from_json_str(text: &str, source: &Path) -> Result<SphereMeshTemplate> {
-        let value: Value = serde_json::from_str(text)
-            .map_err(|e| ModelError::Parse { file: source.to_path_buf(), reason: format!("invalid JSON: {e}") })?;
+        let value: Value = serde_json::from_str(text).map_err(|e| ModelError::Parse {
+            file: source.to_path_buf(),
+            reason: format!("invalid JSON: {e}"),
+        })?;
         Reader { src: source }.template(&value)
     }
 
@@ -323,14 +374,29 @@ impl SphereMeshTemplate {
             if a.name != b.name || a.parent != b.parent || a.dofs != b.dofs {
                 return None;
             }
-            a.rest.rotation.iter().zip(b.rest.rotation.iter()).for_each(|(x, y)| acc(*x, *y));
-            a.rest.translation.iter().zip(b.rest.translation.iter()).for_each(|(x, y)| acc(*x, *y));
+            a.rest
+                .rotation
+                .iter()
+                .zip(b.rest.rotation.iter())
+                .for_each(|(x, y)| acc(*x, *y));
+            a.rest
+                .translation
+                .iter()
+                .zip(b.rest.translation.iter())
+                .for_each(|(x, y)| acc(*x, *y));
         }
         for (a, b) in da.iter().zip(db) {
-            if a.name != b.name || a.bone != b.bone || a.kind != b.kind || a.limits.is_some() != b.limits.is_some() {
+            if a.name != b.name
+                || a.bone != b.bone
+                || a.kind != b.kind
+                || a.limits.is_some() != b.limits.is_some()
+            {
                 return None;
             }
-            a.axis.iter().zip(b.axis.iter()).for_each(|(x, y)| acc(*x, *y));
+            a.axis
+                .iter()
+                .zip(b.axis.iter())
+                .for_each(|(x, y)| acc(*x, *y));
             if let (Some(la), Some(lb)) = (a.limits, b.limits) {
                 acc(la[0], lb[0]);
                 acc(la[1], lb[1]);
@@ -342,10 +408,21 @@ impl SphereMeshTemplate {
             }
             acc(a.radius, b.radius);
             match (&a.attachment, &b.attachment) {
-                (Attachment::Bone { bone: x, offset: oa }, Attachment::Bone { bone: y, offset: ob }) if x == y => {
+                (
+                    Attachment::Bone {
+                        bone: x,
+                        offset: oa,
+                    },
+                    Attachment::Bone {
+                        bone: y,
+                        offset: ob,
+                    },
+                ) if x == y => {
                     oa.iter().zip(ob.iter()).for_each(|(x, y)| acc(*x, *y));
                 }
-                (Attachment::Blend { parts: pa }, Attachment::Blend { parts: pb }) if pa.len() == pb.len() => {
+                (Attachment::Blend { parts: pa }, Attachment::Blend { parts: pb })
+                    if pa.len() == pb.len() =>
+                {
                     for (&(i, wa), &(j, wb)) in pa.iter().zip(pb) {
                         if i != j {
                             return None;
@@ -364,16 +441,26 @@ impl SphereMeshTemplate {
 /// flushed to disk, then renamed over `path`. The temporary file is removed on failure.
 pub(crate) fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
     static COUNTER: AtomicUsize = AtomicUsize::new(0);
-    let io_err = |source: std::io::Error| ModelError::Io { file: path.to_path_buf(), source };
+    let io_err = |source: std::io::Error| ModelError::Io {
+        file: path.to_path_buf(),
+        source,
+    };
     let Some(file_name) = path.file_name() else {
-        return Err(io_err(std::io::Error::new(std::io::ErrorKind::InvalidInput, "the path names no file")));
+        return Err(io_err(std::io::Error::new(
+            std::io::ErrorKind::InvalidInput,
+            "the path names no file",
+        )));
     };
     let dir = match path.parent() {
         Some(d) if !d.as_os_str().is_empty() => d.to_path_buf(),
         _ => PathBuf::from("."),
     };
     let n = COUNTER.fetch_add(1, Ordering::Relaxed);
-    let tmp = dir.join(format!(".{}.tmp-{}-{n}", file_name.to_string_lossy(), std::process::id()));
+    let tmp = dir.join(format!(
+        ".{}.tmp-{}-{n}",
+        file_name.to_string_lossy(),
+        std::process::id()
+    ));
     fn write_then_rename(tmp: &Path, path: &Path, bytes: &[u8]) -> std::io::Result<()> {
         let mut f = std::fs::File::create(tmp)?;
         f.write_all(bytes)?;
@@ -404,33 +491,73 @@ impl Reader<'_> {
     }
 
     fn obj<'v>(&self, v: &'v Value, field: &str, index: Option<usize>) -> Result<&'v Obj> {
-        v.as_object().ok_or_else(|| self.err(field, index, format!("expected an object, got {}", type_name(v))))
+        v.as_object().ok_or_else(|| {
+            self.err(
+                field,
+                index,
+                format!("expected an object, got {}", type_name(v)),
+            )
+        })
     }
 
     fn arr<'v>(&self, v: &'v Value, field: &str, index: Option<usize>) -> Result<&'v Vec<Value>> {
-        v.as_array().ok_or_else(|| self.err(field, index, format!("expected an array, got {}", type_name(v))))
+        v.as_array().ok_or_else(|| {
+            self.err(
+                field,
+                index,
+                format!("expected an array, got {}", type_name(v)),
+            )
+        })
     }
 
-    fn get<'v>(&self, o: &'v Obj, key: &str, field: &str, index: Option<usize>) -> Result<&'v Value> {
-        o.get(key).ok_or_else(|| self.err(field, index, format!("missing `{key}`")))
+    fn get<'v>(
+        &self,
+        o: &'v Obj,
+        key: &str,
+        field: &str,
+        index: Option<usize>,
+    ) -> Result<&'v Value> {
+        o.get(key)
+            .ok_or_else(|| self.err(field, index, format!("missing `{key}`")))
     }
 
     fn string<'v>(&self, v: &'v Value, field: &str, index: Option<usize>) -> Result<&'v str> {
-        v.as_str().ok_or_else(|| self.err(field, index, format!("expected a string, got {}", type_name(v))))
+        v.as_str().ok_or_else(|| {
+            self.err(
+                field,
+                index,
+                format!("expected a string, got {}", type_name(v)),
+            )
+        })
     }
 
     fn number(&self, v: &Value, field: &str, index: Option<usize>) -> Result<f64> {
-        let x = v.as_f64().ok_or_else(|| self.err(field, index, format!("expected a number, got {}", type_name(v))))?;
+        let x = v.as_f64().ok_or_else(|| {
+            self.err(
+                field,
+                index,
+                format!("expected a number, got {}", type_name(v)),
+            )
+        })?;
         if !x.is_finite() {
             return Err(self.err(field, index, "non-finite number"));
         }
         Ok(x)
     }
 
-    fn numbers<const N: usize>(&self, v: &Value, field: &str, index: Option<usize>) -> Result<[f64; N]> {
+    fn numbers<const N: usize>(
+        &self,
+        v: &Value,
+        field: &str,
+        index: Option<usize>,
+    ) -> Result<[f64; N]> {
         let a = self.arr(v, field, index)?;
         if a.len() != N {
-            return Err(self.err(field, index, format!("expected {N} numbers, got {}", a.len())));
+            return Err(self.err(
+                field,
+                index,
+                format!("expected {N} numbers, got {}", a.len()),
+            ));
         }
         let mut out = [0.0; N];
         for (o, x) in out.iter_mut().zip(a) {
@@ -457,9 +584,20 @@ impl Reader<'_> {
         Ok(map)
     }
 
-    fn lookup(&self, map: &HashMap<&str, usize>, name: &str, what: &str, field: &str, index: usize) -> Result<usize> {
+    fn lookup(
+        &self,
+        map: &HashMap<&str, usize>,
+        name: &str,
+        what: &str,
+        field: &str,
+        index: usize,
+    ) -> Result<usize> {
         map.get(name).copied().ok_or_else(|| {
-            let hint = if what == "bone" { " (missing bone)" } else { "" };
+            let hint = if what == "bone" {
+                " (missing bone)"
+            } else {
+                ""
+            };
             self.err(field, Some(index), format!("unknown {what} `{name}`{hint}"))
         })
     }
@@ -468,7 +606,11 @@ impl Reader<'_> {
         let doc = self.obj(root, "<document>", None)?;
         let format = self.string(self.get(doc, "format", "format", None)?, "format", None)?;
         if format != TEMPLATE_FORMAT {
-            return Err(self.err("format", None, format!("expected `{TEMPLATE_FORMAT}`, got `{format}`")));
+            return Err(self.err(
+                "format",
+                None,
+                format!("expected `{TEMPLATE_FORMAT}`, got `{format}`"),
+            ));
         }
         let version = self.get(doc, "version", "version", None)?;
         match version.as_u64() {
@@ -477,16 +619,36 @@ impl Reader<'_> {
                 return Err(self.err(
                     "version",
                     None,
-                    format!("unsupported version {v} (this build reads version {TEMPLATE_VERSION})"),
+                    format!(
+                        "unsupported version {v} (this build reads version {TEMPLATE_VERSION})"
+                    ),
                 ))
             }
-            None => return Err(self.err("version", None, format!("expected an integer, got {version}"))),
+            None => {
+                return Err(self.err(
+                    "version",
+                    None,
+                    format!("expected an integer, got {version}"),
+                ))
+            }
         }
-        let name = self.string(self.get(doc, "name", "name", None)?, "name", None)?.to_string();
-        let handedness = match self.string(self.get(doc, "handedness", "handedness", None)?, "handedness", None)? {
+        let name = self
+            .string(self.get(doc, "name", "name", None)?, "name", None)?
+            .to_string();
+        let handedness = match self.string(
+            self.get(doc, "handedness", "handedness", None)?,
+            "handedness",
+            None,
+        )? {
             "right" => Handedness::Right,
             "left" => Handedness::Left,
-            other => return Err(self.err("handedness", None, format!("expected `right` or `left`, got `{other}`"))),
+            other => {
+                return Err(self.err(
+                    "handedness",
+                    None,
+                    format!("expected `right` or `left`, got `{other}`"),
+                ))
+            }
         };
         let skeleton = self.skeleton(doc)?;
         let spheres = self.spheres(doc, &skeleton)?;
@@ -496,7 +658,14 @@ impl Reader<'_> {
         let bone_map = self.names(&bone_names, "bones.name")?;
         let elements = self.elements(doc, &sphere_map, &bone_map, spheres.len())?;
         let keypoints = self.keypoints(doc, &sphere_map, &bone_map)?;
-        let template = SphereMeshTemplate { name, handedness, skeleton, spheres, elements, keypoints };
+        let template = SphereMeshTemplate {
+            name,
+            handedness,
+            skeleton,
+            spheres,
+            elements,
+            keypoints,
+        };
         template.validate(self.src)?;
         Ok(template)
     }
@@ -508,7 +677,11 @@ impl Reader<'_> {
         let mut bone_names = Vec::with_capacity(bones_v.len());
         for (i, b) in bones_v.iter().enumerate() {
             let o = self.obj(b, "bones", Some(i))?;
-            bone_names.push(self.string(self.get(o, "name", "bones.name", Some(i))?, "bones.name", Some(i))?);
+            bone_names.push(self.string(
+                self.get(o, "name", "bones.name", Some(i))?,
+                "bones.name",
+                Some(i),
+            )?);
             bone_objs.push(o);
         }
         let bone_map = self.names(&bone_names, "bones.name")?;
@@ -516,11 +689,23 @@ impl Reader<'_> {
         let mut dofs = Vec::with_capacity(dofs_v.len());
         for (i, d) in dofs_v.iter().enumerate() {
             let o = self.obj(d, "dofs", Some(i))?;
-            let name = self.string(self.get(o, "name", "dofs.name", Some(i))?, "dofs.name", Some(i))?;
+            let name = self.string(
+                self.get(o, "name", "dofs.name", Some(i))?,
+                "dofs.name",
+                Some(i),
+            )?;
             dof_names.push(name);
-            let bone_name = self.string(self.get(o, "bone", "dofs.bone", Some(i))?, "dofs.bone", Some(i))?;
+            let bone_name = self.string(
+                self.get(o, "bone", "dofs.bone", Some(i))?,
+                "dofs.bone",
+                Some(i),
+            )?;
             let bone = self.lookup(&bone_map, bone_name, "bone", "dofs.bone", i)?;
-            let kind = match self.string(self.get(o, "kind", "dofs.kind", Some(i))?, "dofs.kind", Some(i))? {
+            let kind = match self.string(
+                self.get(o, "kind", "dofs.kind", Some(i))?,
+                "dofs.kind",
+                Some(i),
+            )? {
                 "translation" => DofKind::Translation,
                 "global_rotation" => DofKind::GlobalRotation,
                 "rotation" => DofKind::Rotation,
@@ -528,16 +713,28 @@ impl Reader<'_> {
                     return Err(self.err(
                         "dofs.kind",
                         Some(i),
-                        format!("expected `translation`, `global_rotation` or `rotation`, got `{other}`"),
+                        format!(
+                        "expected `translation`, `global_rotation` or `rotation`, got `{other}`"
+                    ),
                     ))
                 }
             };
-            let axis = self.vec3(self.get(o, "axis", "dofs.axis", Some(i))?, "dofs.axis", Some(i))?;
+            let axis = self.vec3(
+                self.get(o, "axis", "dofs.axis", Some(i))?,
+                "dofs.axis",
+                Some(i),
+            )?;
             let limits = match o.get("limits") {
                 None | Some(Value::Null) => None,
                 Some(v) => Some(self.numbers::<2>(v, "dofs.limits", Some(i))?),
             };
-            dofs.push(Dof { name: name.to_string(), bone, kind, axis, limits });
+            dofs.push(Dof {
+                name: name.to_string(),
+                bone,
+                kind,
+                axis,
+                limits,
+            });
         }
         let dof_map = self.names(&dof_names, "dofs.name")?;
         let mut bones = Vec::with_capacity(bone_objs.len());
@@ -551,16 +748,31 @@ impl Reader<'_> {
                         return Err(self.err(
                             "bones.parent",
                             Some(i),
-                            format!("parent `{p_name}` must be listed before bone `{}`", bone_names[i]),
+                            format!(
+                                "parent `{p_name}` must be listed before bone `{}`",
+                                bone_names[i]
+                            ),
                         ));
                     }
                     Some(p)
                 }
             };
-            let rest = self.obj(self.get(o, "rest", "bones.rest", Some(i))?, "bones.rest", Some(i))?;
-            let rows = self.arr(self.get(rest, "rotation", "bones.rest.rotation", Some(i))?, "bones.rest.rotation", Some(i))?;
+            let rest = self.obj(
+                self.get(o, "rest", "bones.rest", Some(i))?,
+                "bones.rest",
+                Some(i),
+            )?;
+            let rows = self.arr(
+                self.get(rest, "rotation", "bones.rest.rotation", Some(i))?,
+                "bones.rest.rotation",
+                Some(i),
+            )?;
             if rows.len() != 3 {
-                return Err(self.err("bones.rest.rotation", Some(i), format!("expected 3 rows, got {}", rows.len())));
+                return Err(self.err(
+                    "bones.rest.rotation",
+                    Some(i),
+                    format!("expected 3 rows, got {}", rows.len()),
+                ));
             }
             let mut rotation = Matrix3::zeros();
             for (r, row) in rows.iter().enumerate() {
@@ -569,9 +781,16 @@ impl Reader<'_> {
                     rotation[(r, c)] = x;
                 }
             }
-            let translation =
-                self.vec3(self.get(rest, "translation", "bones.rest.translation", Some(i))?, "bones.rest.translation", Some(i))?;
-            let dof_list = self.arr(self.get(o, "dofs", "bones.dofs", Some(i))?, "bones.dofs", Some(i))?;
+            let translation = self.vec3(
+                self.get(rest, "translation", "bones.rest.translation", Some(i))?,
+                "bones.rest.translation",
+                Some(i),
+            )?;
+            let dof_list = self.arr(
+                self.get(o, "dofs", "bones.dofs", Some(i))?,
+                "bones.dofs",
+                Some(i),
+            )?;
             let mut bone_dofs = Vec::with_capacity(dof_list.len());
             for d in dof_list {
                 let d_name = self.string(d, "bones.dofs", Some(i))?;
@@ -596,7 +815,11 @@ impl Reader<'_> {
         let mut names = Vec::with_capacity(list.len());
         for (i, s) in list.iter().enumerate() {
             let o = self.obj(s, "spheres", Some(i))?;
-            names.push(self.string(self.get(o, "name", "spheres.name", Some(i))?, "spheres.name", Some(i))?);
+            names.push(self.string(
+                self.get(o, "name", "spheres.name", Some(i))?,
+                "spheres.name",
+                Some(i),
+            )?);
             objs.push(o);
         }
         let map = self.names(&names, "spheres.name")?;
@@ -608,7 +831,11 @@ impl Reader<'_> {
                 for p in parts_v {
                     let pair = self.arr(p, "spheres.blend", Some(i))?;
                     if pair.len() != 2 {
-                        return Err(self.err("spheres.blend", Some(i), "each part must be [sphere name, weight]"));
+                        return Err(self.err(
+                            "spheres.blend",
+                            Some(i),
+                            "each part must be [sphere name, weight]",
+                        ));
                     }
                     let p_name = self.string(&pair[0], "spheres.blend", Some(i))?;
                     let idx = self.lookup(&map, p_name, "sphere", "spheres.blend", i)?;
@@ -616,30 +843,70 @@ impl Reader<'_> {
                 }
                 (Attachment::Blend { parts }, 0.0)
             } else {
-                let bone_name = self.string(self.get(o, "bone", "spheres.bone", Some(i))?, "spheres.bone", Some(i))?;
+                let bone_name = self.string(
+                    self.get(o, "bone", "spheres.bone", Some(i))?,
+                    "spheres.bone",
+                    Some(i),
+                )?;
                 let bone = self.lookup(&bone_map, bone_name, "bone", "spheres.bone", i)?;
-                let center = self.vec3(self.get(o, "center", "spheres.center", Some(i))?, "spheres.center", Some(i))?;
-                let radius = self.number(self.get(o, "radius", "spheres.radius", Some(i))?, "spheres.radius", Some(i))?;
+                let center = self.vec3(
+                    self.get(o, "center", "spheres.center", Some(i))?,
+                    "spheres.center",
+                    Some(i),
+                )?;
+                let radius = self.number(
+                    self.get(o, "radius", "spheres.radius", Some(i))?,
+                    "spheres.radius",
+                    Some(i),
+                )?;
                 if radius < 0.0 {
-                    return Err(self.err("spheres.radius", Some(i), format!("negative radius {radius}")));
+                    return Err(self.err(
+                        "spheres.radius",
+                        Some(i),
+                        format!("negative radius {radius}"),
+                    ));
                 }
                 let offset = globals[bone].inverse().transform_point(&center);
                 (Attachment::Bone { bone, offset }, radius)
             };
-            out.push(SphereDef { name: names[i].to_string(), attachment, radius });
+            out.push(SphereDef {
+                name: names[i].to_string(),
+                attachment,
+                radius,
+            });
         }
         Ok(out)
     }
 
-    fn sphere_ref(&self, v: &Value, map: &HashMap<&str, usize>, n: usize, index: usize) -> Result<u32> {
+    fn sphere_ref(
+        &self,
+        v: &Value,
+        map: &HashMap<&str, usize>,
+        n: usize,
+        index: usize,
+    ) -> Result<u32> {
         let i = match v {
             Value::String(name) => self.lookup(map, name, "sphere", "elements", index)?,
-            Value::Number(_) => match v.as_u64().and_then(|i| usize::try_from(i).ok()).filter(|&i| i < n) {
+            Value::Number(_) => match v
+                .as_u64()
+                .and_then(|i| usize::try_from(i).ok())
+                .filter(|&i| i < n)
+            {
                 Some(i) => i,
-                None => return Err(self.err("elements", Some(index), format!("sphere index {v} out of range ({n} spheres)"))),
+                None => {
+                    return Err(self.err(
+                        "elements",
+                        Some(index),
+                        format!("sphere index {v} out of range ({n} spheres)"),
+                    ))
+                }
             },
             other => {
-                return Err(self.err("elements", Some(index), format!("expected a sphere name, got {}", type_name(other))))
+                return Err(self.err(
+                    "elements",
+                    Some(index),
+                    format!("expected a sphere name, got {}", type_name(other)),
+                ))
             }
         };
         u32::try_from(i).map_err(|_| self.err("elements", Some(index), "sphere index too large"))
@@ -652,7 +919,11 @@ impl Reader<'_> {
         bones: &HashMap<&str, usize>,
         n: usize,
     ) -> Result<Vec<ElementDef>> {
-        let list = self.arr(self.get(doc, "elements", "elements", None)?, "elements", None)?;
+        let list = self.arr(
+            self.get(doc, "elements", "elements", None)?,
+            "elements",
+            None,
+        )?;
         let mut out = Vec::with_capacity(list.len());
         for (e, v) in list.iter().enumerate() {
             let o = self.obj(v, "elements", Some(e))?;
@@ -660,14 +931,25 @@ impl Reader<'_> {
                 (Some(p), None) => {
                     let a = self.arr(p, "elements", Some(e))?;
                     if a.len() != 2 {
-                        return Err(self.err("elements", Some(e), format!("a pill joins 2 spheres, got {}", a.len())));
+                        return Err(self.err(
+                            "elements",
+                            Some(e),
+                            format!("a pill joins 2 spheres, got {}", a.len()),
+                        ));
                     }
-                    Element::Pill([self.sphere_ref(&a[0], spheres, n, e)?, self.sphere_ref(&a[1], spheres, n, e)?])
+                    Element::Pill([
+                        self.sphere_ref(&a[0], spheres, n, e)?,
+                        self.sphere_ref(&a[1], spheres, n, e)?,
+                    ])
                 }
                 (None, Some(w)) => {
                     let a = self.arr(w, "elements", Some(e))?;
                     if a.len() != 3 {
-                        return Err(self.err("elements", Some(e), format!("a wedge joins 3 spheres, got {}", a.len())));
+                        return Err(self.err(
+                            "elements",
+                            Some(e),
+                            format!("a wedge joins 3 spheres, got {}", a.len()),
+                        ));
                     }
                     Element::Wedge([
                         self.sphere_ref(&a[0], spheres, n, e)?,
@@ -675,9 +957,19 @@ impl Reader<'_> {
                         self.sphere_ref(&a[2], spheres, n, e)?,
                     ])
                 }
-                _ => return Err(self.err("elements", Some(e), "expected exactly one of `pill` or `wedge`")),
+                _ => {
+                    return Err(self.err(
+                        "elements",
+                        Some(e),
+                        "expected exactly one of `pill` or `wedge`",
+                    ))
+                }
             };
-            let bone_name = self.string(self.get(o, "bone", "elements.bone", Some(e))?, "elements.bone", Some(e))?;
+            let bone_name = self.string(
+                self.get(o, "bone", "elements.bone", Some(e))?,
+                "elements.bone",
+                Some(e),
+            )?;
             let bone = self.lookup(bones, bone_name, "bone", "elements.bone", e)?;
             out.push(ElementDef { element, bone });
         }
@@ -690,19 +982,34 @@ impl Reader<'_> {
         spheres: &HashMap<&str, usize>,
         bones: &HashMap<&str, usize>,
     ) -> Result<Vec<KeypointDef>> {
-        let list = self.arr(self.get(doc, "keypoints", "keypoints", None)?, "keypoints", None)?;
+        let list = self.arr(
+            self.get(doc, "keypoints", "keypoints", None)?,
+            "keypoints",
+            None,
+        )?;
         if list.len() != NUM_KEYPOINTS {
-            return Err(self.err("keypoints", None, format!("{} keypoints, expected {NUM_KEYPOINTS}", list.len())));
+            return Err(self.err(
+                "keypoints",
+                None,
+                format!("{} keypoints, expected {NUM_KEYPOINTS}", list.len()),
+            ));
         }
         let mut out = Vec::with_capacity(NUM_KEYPOINTS);
         for (k, v) in list.iter().enumerate() {
             let o = self.obj(v, "keypoints", Some(k))?;
-            let name = self.string(self.get(o, "name", "keypoints.name", Some(k))?, "keypoints.name", Some(k))?;
+            let name = self.string(
+                self.get(o, "name", "keypoints.name", Some(k))?,
+                "keypoints.name",
+                Some(k),
+            )?;
             if name != KEYPOINT_NAMES[k] {
                 return Err(self.err(
                     "keypoints.name",
                     Some(k),
-                    format!("expected `{}` (DESIGN.md order), got `{name}`", KEYPOINT_NAMES[k]),
+                    format!(
+                        "expected `{}` (DESIGN.md order), got `{name}`",
+                        KEYPOINT_NAMES[k]
+                    ),
                 ));
             }
             let bone_of = |key: &str, field: &str| -> Result<usize> {
@@ -710,11 +1017,16 @@ impl Reader<'_> {
                 self.lookup(bones, b, "bone", field, k)
             };
             let def = if o.contains_key("joint") {
-                KeypointDef::Joint { bone: bone_of("joint", "keypoints.joint")? }
+                KeypointDef::Joint {
+                    bone: bone_of("joint", "keypoints.joint")?,
+                }
             } else if let Some(tip) = o.get("tip") {
                 let s = self.string(tip, "keypoints.tip", Some(k))?;
                 let sphere = self.lookup(spheres, s, "sphere", "keypoints.tip", k)?;
-                KeypointDef::Tip { bone: bone_of("bone", "keypoints.bone")?, sphere }
+                KeypointDef::Tip {
+                    bone: bone_of("bone", "keypoints.bone")?,
+                    sphere,
+                }
             } else {
                 return Err(self.err("keypoints", Some(k), "expected `joint` or `tip`"));
             };
@@ -743,11 +1055,15 @@ mod tests {
     fn temp_path(tag: &str) -> PathBuf {
         static N: AtomicUsize = AtomicUsize::new(0);
         let n = N.fetch_add(1, Ordering::Relaxed);
-        std::env::temp_dir().join(format!("hands-json-test-{}-{tag}-{n}.json", std::process::id()))
+        std::env::temp_dir().join(format!(
+            "hands-json-test-{}-{tag}-{n}.json",
+            std::process::id()
+        ))
     }
 
     fn default_json() -> Value {
-        serde_json::from_str(&default_right_hand().to_json_string().expect("serializes")).expect("valid JSON")
+        serde_json::from_str(&default_right_hand().to_json_string().expect("serializes"))
+            .expect("valid JSON")
     }
 
     /// Parse an edited document and return the error text.
@@ -774,7 +1090,11 @@ mod tests {
         let leftovers = std::fs::read_dir(dir)
             .unwrap()
             .filter_map(|e| e.ok())
-            .filter(|e| e.file_name().to_string_lossy().starts_with(&format!(".{stem}.tmp")))
+            .filter(|e| {
+                e.file_name()
+                    .to_string_lossy()
+                    .starts_with(&format!(".{stem}.tmp"))
+            })
             .count();
         assert_eq!(leftovers, 0);
     }
@@ -783,7 +1103,10 @@ mod tests {
     fn file_is_readable_with_names() {
         let text = default_right_hand().to_json_string().unwrap();
         assert!(text.starts_with("{\n  \"format\": \"hands.spheremesh\",\n  \"version\": 1,"));
-        assert!(text.contains("\"pill\": [\"index_middle\", \"index_top\"]"), "{text}");
+        assert!(
+            text.contains("\"pill\": [\"index_middle\", \"index_top\"]"),
+            "{text}"
+        );
         assert!(text.contains("{\"name\": \"wrist\", \"joint\": \"wrist\"}"));
         assert!(text.contains("\"blend\": [[\"palm_thumb\", 0.4], [\"thumb_membrane_left\", 0.3], [\"thumb_base\", 0.3]]"));
     }
@@ -792,7 +1115,8 @@ mod tests {
     fn element_indices_are_accepted_as_well_as_names() {
         let mut doc = default_json();
         doc["elements"][0]["pill"] = serde_json::json!([1, 0]);
-        let t = SphereMeshTemplate::from_json_str(&doc.to_string(), Path::new("x.json")).expect("indices accepted");
+        let t = SphereMeshTemplate::from_json_str(&doc.to_string(), Path::new("x.json"))
+            .expect("indices accepted");
         assert_eq!(t.elements[0].element, Element::Pill([1, 0]));
     }
 
@@ -805,7 +1129,10 @@ mod tests {
         let mut doc = default_json();
         doc["version"] = 2.into();
         let e = refuse(&doc);
-        assert!(e.contains("`version`") && e.contains("unsupported version 2"), "{e}");
+        assert!(
+            e.contains("`version`") && e.contains("unsupported version 2"),
+            "{e}"
+        );
         let mut doc = default_json();
         doc.as_object_mut().unwrap().remove("format");
         assert!(refuse(&doc).contains("missing `format`"));
@@ -816,15 +1143,25 @@ mod tests {
         let mut doc = default_json();
         doc["bones"][4]["parent"] = "no_such_bone".into();
         let e = refuse(&doc);
-        assert!(e.contains("`bones.parent`[4]") && e.contains("missing bone"), "{e}");
+        assert!(
+            e.contains("`bones.parent`[4]") && e.contains("missing bone"),
+            "{e}"
+        );
         let mut doc = default_json();
         doc["spheres"][3]["bone"] = "nope".into();
         let e = refuse(&doc);
-        assert!(e.contains("`spheres.bone`[3]") && e.contains("unknown bone"), "{e}");
+        assert!(
+            e.contains("`spheres.bone`[3]") && e.contains("unknown bone"),
+            "{e}"
+        );
         let mut doc = default_json();
-        doc["elements"][15]["wedge"] = serde_json::json!(["palm_back", "palm_right", "palm_nowhere"]);
+        doc["elements"][15]["wedge"] =
+            serde_json::json!(["palm_back", "palm_right", "palm_nowhere"]);
         let e = refuse(&doc);
-        assert!(e.contains("`elements`[15]") && e.contains("unknown sphere `palm_nowhere`"), "{e}");
+        assert!(
+            e.contains("`elements`[15]") && e.contains("unknown sphere `palm_nowhere`"),
+            "{e}"
+        );
         let mut doc = default_json();
         doc["bones"][2]["dofs"][0] = "wrist_twist".into();
         assert!(refuse(&doc).contains("`bones.dofs`[2]"));
@@ -842,11 +1179,17 @@ mod tests {
         let mut doc = default_json();
         doc["spheres"][7]["radius"] = (-1.5).into();
         let e = refuse(&doc);
-        assert!(e.contains("`spheres.radius`[7]") && e.contains("negative radius"), "{e}");
+        assert!(
+            e.contains("`spheres.radius`[7]") && e.contains("negative radius"),
+            "{e}"
+        );
         let mut doc = default_json();
         doc["elements"][2]["pill"] = serde_json::json!([0, 39]);
         let e = refuse(&doc);
-        assert!(e.contains("`elements`[2]") && e.contains("out of range"), "{e}");
+        assert!(
+            e.contains("`elements`[2]") && e.contains("out of range"),
+            "{e}"
+        );
         let mut doc = default_json();
         doc["spheres"][1]["center"] = serde_json::json!([1.0, "two", 3.0]);
         assert!(refuse(&doc).contains("`spheres.center`[1]"));
@@ -866,17 +1209,24 @@ mod tests {
         let mut doc = default_json();
         doc["keypoints"].as_array_mut().unwrap().pop();
         let e = refuse(&doc);
-        assert!(e.contains("`keypoints`") && e.contains("20 keypoints, expected 21"), "{e}");
+        assert!(
+            e.contains("`keypoints`") && e.contains("20 keypoints, expected 21"),
+            "{e}"
+        );
         let mut doc = default_json();
         doc["keypoints"][1]["name"] = "thumb_mcp".into();
         assert!(refuse(&doc).contains("`keypoints.name`[1]"));
         let mut doc = default_json();
-        doc["elements"][0]["pill"] = serde_json::json!(["pinky_middle", "pinky_top", "pinky_bottom"]);
+        doc["elements"][0]["pill"] =
+            serde_json::json!(["pinky_middle", "pinky_top", "pinky_bottom"]);
         assert!(refuse(&doc).contains("a pill joins 2 spheres"));
         let mut doc = default_json();
         doc["spheres"][5]["name"] = doc["spheres"][2]["name"].clone();
         let e = refuse(&doc);
-        assert!(e.contains("`spheres.name`[5]") && e.contains("duplicate"), "{e}");
+        assert!(
+            e.contains("`spheres.name`[5]") && e.contains("duplicate"),
+            "{e}"
+        );
         let mut doc = default_json();
         doc["bones"][7]["name"] = "index_1".into();
         assert!(refuse(&doc).contains("`bones.name`"));
@@ -888,8 +1238,14 @@ mod tests {
     #[test]
     fn refuses_non_finite_numbers() {
         // JSON cannot spell NaN or infinity; an overflowing literal is refused while parsing.
-        let text = default_right_hand().to_json_string().unwrap().replacen("\"radius\": ", "\"radius\": 1e999, \"r0\": ", 1);
-        let e = SphereMeshTemplate::from_json_str(&text, Path::new("big.json")).unwrap_err().to_string();
+        let text = default_right_hand().to_json_string().unwrap().replacen(
+            "\"radius\": ",
+            "\"radius\": 1e999, \"r0\": ",
+            1,
+        );
+        let e = SphereMeshTemplate::from_json_str(&text, Path::new("big.json"))
+            .unwrap_err()
+            .to_string();
         assert!(e.contains("big.json") && e.contains("line"), "{e}");
         // And a template holding a NaN is not written.
         let mut t = default_right_hand();
@@ -897,15 +1253,22 @@ mod tests {
         let e = t.to_json_string().unwrap_err().to_string();
         assert!(e.contains("spheres.radius") && e.contains("[4]"), "{e}");
         // Syntax errors name the file and the position.
-        let e = SphereMeshTemplate::from_json_str("{\"format\": ", Path::new("cut.json")).unwrap_err().to_string();
+        let e = SphereMeshTemplate::from_json_str("{\"format\": ", Path::new("cut.json"))
+            .unwrap_err()
+            .to_string();
         assert!(e.contains("cut.json") && e.contains("line 1"), "{e}");
     }
 
     #[test]
     fn load_names_missing_file() {
-        let e = SphereMeshTemplate::load("/nonexistent/dir/hand.json").unwrap_err().to_string();
+        let e = SphereMeshTemplate::load("/nonexistent/dir/hand.json")
+            .unwrap_err()
+            .to_string();
         assert!(e.contains("/nonexistent/dir/hand.json"), "{e}");
-        let e = default_right_hand().save("/nonexistent/dir/hand.json").unwrap_err().to_string();
+        let e = default_right_hand()
+            .save("/nonexistent/dir/hand.json")
+            .unwrap_err()
+            .to_string();
         assert!(e.contains("/nonexistent/dir/hand.json"), "{e}");
     }
 }

@@ -10,8 +10,8 @@ mod template;
 
 pub use default::default_right_hand;
 pub use import_hmodel::{
-    detect_hmodel_variant, export_hmodel_dir, import_hmodel_dir, pose_from_honline_theta, HmodelVariant,
-    HONLINE_THETA_DOFS, PILL_SENTINEL,
+    detect_hmodel_variant, export_hmodel_dir, import_hmodel_dir, pose_from_honline_theta,
+    HmodelVariant, HONLINE_THETA_DOFS, PILL_SENTINEL,
 };
 pub use json::{TEMPLATE_FORMAT, TEMPLATE_VERSION};
 pub use posed::PosedSphereMesh;
