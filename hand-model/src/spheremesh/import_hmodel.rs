@@ -1,56 +1,6 @@
 //! Import and export of the original hmodel / honline sphere-mesh files (`C.txt`, `R.txt`,
-//! `B.txt`, `I.txt`; ANCHOR-FACTS §2.1–2.6).
-//!
-//! # The files
-//! Every file is whitespace-separated text whose first number is a count N:
-//! - `C.txt`: N sphere centers (x y z, mm) in the rest pose, model frame. The honline file writes
-//!   its last center with commas (`24.139700, 32.040798, -12.749390`); commas are treated as
-//!   separators here, so it parses.
-//! - `R.txt`: N radii (mm).
-//! - `B.txt`: N blocks of three sphere indices; a third index of [`PILL_SENTINEL`] (32767, MSVC's
-//!   `RAND_MAX`) marks a pill, anything else a wedge.
-//! - `I.txt`: N 4×4 rest transforms (`init_local`, relative to the parent phalange), stored
-//!   column-major, one per phalange in the original order (Hand, Thumb1..3, Pinky1..3, Ring1..3,
-//!   Middle1..3, Index1..3, Wrist, Position). hmodel writes 19 (the last one is unused), honline
-//!   18; only the first 18 are read.
-//!
-//! Two variants are recognized by their sphere count: **hmodel** (38 spheres, 30 blocks; sphere 33
-//! is `thumb_fold` on Thumb1) and **honline** (39 spheres, 31 blocks; sphere 33 is
-//! `thumb_membrane_left` on Thumb2 and sphere 38 is the derived `thumb_membrane_middle`).
-//!
-//! # What the importer builds (the way the originals initialize the model)
-//! - Bones: Position → `root` (carrying the six `global_*` DOFs), Hand → `palm`, Wrist → `wrist`,
-//!   HandThumb1..3 → `thumb_1..3`, HandIndex1..3 → `index_1..3`, and so on; rest frames are the
-//!   `I.txt` transforms (rotations projected onto SO(3), which moves nothing by more than
-//!   ~1e-4 mm for 6-digit files).
-//! - DOFs: the honline θ layout with this crate's names ([`HONLINE_THETA_DOFS`]), axes and limits
-//!   (ANCHOR-FACTS §1.3; for hmodel files the 28 DOFs of θ0..28 without slot 6, with the hmodel
-//!   thumb IP limit [−0.9, 0.7]; honline adds the five MCP twists). Each bone applies its DOFs in
-//!   the original pass order: X (flexion), then Z (abduction), then Y (twist), each rotation
-//!   post-multiplying the rest frame.
-//! - Spheres keep the file order and get the honline names. The "center" sphere of each phalange
-//!   sits at the bone origin (offset 0, as `Model::update_centers` places it); every other sphere
-//!   is attached with `offset = R_global⁻¹·(c − t_global)` at θ = 0
-//!   (`Model::initialize_offsets`). No calibration-type adjustments are applied (the NONE
-//!   setting: palm offsets keep their z, finger bases are not moved 3 mm).
-//! - honline only, the thumb rewrite of `initialize_offsets` (§2.3): `thumb_membrane_left`'s
-//!   offset becomes (0, 12, 0) and the x offsets of `thumb_top` and `thumb_additional` become 0;
-//!   `thumb_membrane_middle` is the [`Attachment::Blend`] 0.4·palm_thumb + 0.3·thumb_membrane_left
-//!   + 0.3·thumb_base (center and radius). Its C.txt/R.txt values are ignored.
-//! - Elements: blocks re-ordered like `Model::reindex` (largest radius first), each with the bone
-//!   of the original block → phalange map (§2.4; for hmodel files block 26, the thumb_base /
-//!   thumb_fold / palm_thumb wedge, maps to Thumb1 as in hmodel's own map). A file whose block
-//!   count differs from its variant's uses the lowest common ancestor of the spheres' bones,
-//!   which reproduces the honline map exactly.
-//! - Keypoints: wrist = `wrist` bone origin; joints = bone origins; tips = the `<finger>_top`
-//!   sphere plus its radius along the distal bone's +y. The thumb tip uses `thumb_additional`,
-//!   whose far surface lies further along the distal thumb axis than `thumb_top`'s (≈ 25.7 mm
-//!   versus ≈ 21.0 mm past the IP joint in the honline model), matching the default template.
-//!
-//! # Handedness
-//! The original files are geometrically **left** hands (index toward +x, palm toward −z); the
-//! importer returns them as [`Handedness::Left`] without changing any number, and
-//! [`SphereMeshTemplate::mirrored`] gives the right hand.
+//! `B.txt`, `I.txt`; ANCHOR-FACTS §2.1–2.6). The conventions are documented on
+//! [`import_hmodel_dir`].
 
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
@@ -892,8 +842,61 @@ fn build_template(raw: &RawModel, dir: &Path) -> Result<SphereMeshTemplate> {
 }
 
 /// Import an original hmodel or honline model folder (`C.txt`, `R.txt`, `B.txt`, `I.txt`) as a
-/// **left-hand** template (see the module documentation for every convention).
+/// **left-hand** template.
 ///
+/// # The files
+/// Every file is whitespace-separated text whose first number is a count N:
+/// - `C.txt`: N sphere centers (x y z, mm) in the rest pose, model frame. The honline file writes
+///   its last center with commas (`24.139700, 32.040798, -12.749390`); commas are treated as
+///   separators here, so it parses.
+/// - `R.txt`: N radii (mm).
+/// - `B.txt`: N blocks of three sphere indices; a third index of [`PILL_SENTINEL`] (32767, MSVC's
+///   `RAND_MAX`) marks a pill, anything else a wedge.
+/// - `I.txt`: N 4×4 rest transforms (`init_local`, relative to the parent phalange), stored
+///   column-major, one per phalange in the original order (Hand, Thumb1..3, Pinky1..3, Ring1..3,
+///   Middle1..3, Index1..3, Wrist, Position). hmodel writes 19 (the last one is unused), honline
+///   18; only the first 18 are read.
+///
+/// Two variants are recognized by their sphere count: **hmodel** (38 spheres, 30 blocks; sphere 33
+/// is `thumb_fold` on Thumb1) and **honline** (39 spheres, 31 blocks; sphere 33 is
+/// `thumb_membrane_left` on Thumb2 and sphere 38 is the derived `thumb_membrane_middle`).
+///
+/// # What the importer builds (the way the originals initialize the model)
+/// - Bones: Position → `root` (carrying the six `global_*` DOFs), Hand → `palm`, Wrist → `wrist`,
+///   HandThumb1..3 → `thumb_1..3`, HandIndex1..3 → `index_1..3`, and so on; rest frames are the
+///   `I.txt` transforms (rotations projected onto SO(3), which moves nothing by more than
+///   ~1e-4 mm for 6-digit files).
+/// - DOFs: the honline θ layout with this crate's names ([`HONLINE_THETA_DOFS`]), axes and limits
+///   (ANCHOR-FACTS §1.3; for hmodel files the 28 DOFs of θ0..28 without slot 6, with the hmodel
+///   thumb IP limit [−0.9, 0.7]; honline adds the five MCP twists). Each bone applies its DOFs in
+///   the original pass order: X (flexion), then Z (abduction), then Y (twist), each rotation
+///   post-multiplying the rest frame.
+/// - Spheres keep the file order and get the honline names. The "center" sphere of each phalange
+///   sits at the bone origin (offset 0, as `Model::update_centers` places it); every other sphere
+///   is attached with `offset = R_global⁻¹·(c − t_global)` at θ = 0
+///   (`Model::initialize_offsets`). No calibration-type adjustments are applied (the NONE
+///   setting: palm offsets keep their z, finger bases are not moved 3 mm).
+/// - honline only, the thumb rewrite of `initialize_offsets` (§2.3): `thumb_membrane_left`'s
+///   offset becomes (0, 12, 0) and the x offsets of `thumb_top` and `thumb_additional` become 0;
+///   `thumb_membrane_middle` is the [`Attachment::Blend`] of palm_thumb, thumb_membrane_left and
+///   thumb_base with weights 0.4, 0.3, 0.3 (center and radius); its C.txt/R.txt values are
+///   ignored.
+/// - Elements: blocks re-ordered like `Model::reindex` (largest radius first), each with the bone
+///   of the original block → phalange map (§2.4; for hmodel files block 26, the thumb_base /
+///   thumb_fold / palm_thumb wedge, maps to Thumb1 as in hmodel's own map). A file whose block
+///   count differs from its variant's uses the lowest common ancestor of the spheres' bones,
+///   which reproduces the honline map exactly.
+/// - Keypoints: wrist = `wrist` bone origin; joints = bone origins; tips = the `<finger>_top`
+///   sphere plus its radius along the distal bone's +y. The thumb tip uses `thumb_additional`,
+///   whose far surface lies further along the distal thumb axis than `thumb_top`'s (≈ 25.7 mm
+///   versus ≈ 21.0 mm past the IP joint in the honline model), matching the default template.
+///
+/// # Handedness
+/// The original files are geometrically **left** hands (index toward +x, palm toward −z); the
+/// importer returns them as [`Handedness::Left`] without changing any number, and
+/// [`SphereMeshTemplate::mirrored`] gives the right hand.
+///
+/// # Errors
 /// Refused with a [`ModelError`] naming the file, the field and the index: missing or unreadable
 /// files, truncated files, counts that disagree with the data or with each other, non-numeric
 /// tokens, NaN/infinite values, negative radii, block indices out of range, transforms that are

@@ -1,46 +1,6 @@
-//! The versioned JSON template format (`hands.spheremesh`, version 1).
-//!
-//! A template file names everything instead of indexing it, so that it can be read and edited
-//! by hand:
-//!
-//! ```json
-//! {
-//!   "format": "hands.spheremesh",
-//!   "version": 1,
-//!   "name": "hands default right hand",
-//!   "handedness": "right",
-//!   "bones": [
-//!     {"name": "root", "parent": null,
-//!      "rest": {"rotation": [[1, 0, 0], [0, 1, 0], [0, 0, 1]], "translation": [0, 0, 0]},
-//!      "dofs": ["global_tx", "global_ty", "global_tz", "global_rx", "global_ry", "global_rz"]},
-//!     {"name": "palm", "parent": "root", "rest": {...}, "dofs": []}
-//!   ],
-//!   "dofs": [
-//!     {"name": "global_tx", "bone": "root", "kind": "translation", "axis": [1, 0, 0], "limits": null},
-//!     {"name": "index_mcp_flex", "bone": "index_1", "kind": "rotation", "axis": [1, 0, 0], "limits": [-0.5, 1.6]}
-//!   ],
-//!   "spheres": [
-//!     {"name": "index_base", "bone": "index_1", "center": [-27, 57, 3], "radius": 9.8},
-//!     {"name": "thumb_membrane_middle", "blend": [["palm_thumb", 0.4], ["thumb_membrane_left", 0.3], ["thumb_base", 0.3]]}
-//!   ],
-//!   "elements": [{"pill": ["index_base", "index_bottom"], "bone": "index_1"},
-//!                {"wedge": ["palm_back", "palm_right", "palm_ring"], "bone": "palm"}],
-//!   "keypoints": [{"name": "wrist", "joint": "wrist"},
-//!                 {"name": "index_tip", "tip": "index_top", "bone": "index_3"}]
-//! }
-//! ```
-//!
-//! - `bones`: parents before children; `rest` is the rest frame relative to the parent
-//!   (rotation row-major); `dofs` lists the bone's DOFs in application order.
-//! - `dofs`: in pose-vector order; `kind` is `translation`, `global_rotation` or `rotation`.
-//! - `spheres`: `center` is in the model frame at the rest pose (converted to a bone offset on
-//!   load); a blend sphere gives `[sphere, weight]` pairs of earlier bone-attached spheres and no
-//!   radius (it is the blend of the parts' radii).
-//! - `elements`: sphere names (integer indices are accepted too).
-//! - `keypoints`: exactly the 21 of DESIGN.md, in order, with their names.
-//!
-//! Unknown keys are ignored. Everything else is checked, and a bad file is refused with a
-//! [`ModelError`] naming the file, the field and the index.
+//! The versioned JSON template format (`hands.spheremesh`, version 1), documented on
+//! [`TEMPLATE_FORMAT`]; see [`SphereMeshTemplate::to_json_string`], [`SphereMeshTemplate::load`]
+//! and [`SphereMeshTemplate::save`].
 
 use std::collections::HashMap;
 use std::fmt::Write as _;
@@ -58,7 +18,49 @@ use crate::kinematics::{Bone, Dof, DofKind, Skeleton};
 use crate::math::Rigid3;
 use crate::shape::Element;
 
-/// The `format` tag of sphere-mesh template files.
+/// The `format` tag of sphere-mesh template files (`hands.spheremesh`).
+///
+/// A template file names everything instead of indexing it, so that it can be read and edited
+/// by hand:
+///
+/// ```json
+/// {
+///   "format": "hands.spheremesh",
+///   "version": 1,
+///   "name": "hands default right hand",
+///   "handedness": "right",
+///   "bones": [
+///     {"name": "root", "parent": null,
+///      "rest": {"rotation": [[1, 0, 0], [0, 1, 0], [0, 0, 1]], "translation": [0, 0, 0]},
+///      "dofs": ["global_tx", "global_ty", "global_tz", "global_rx", "global_ry", "global_rz"]},
+///     {"name": "palm", "parent": "root", "rest": {...}, "dofs": []}
+///   ],
+///   "dofs": [
+///     {"name": "global_tx", "bone": "root", "kind": "translation", "axis": [1, 0, 0], "limits": null},
+///     {"name": "index_mcp_flex", "bone": "index_1", "kind": "rotation", "axis": [1, 0, 0], "limits": [-0.5, 1.6]}
+///   ],
+///   "spheres": [
+///     {"name": "index_base", "bone": "index_1", "center": [-27, 57, 3], "radius": 9.8},
+///     {"name": "thumb_membrane_middle", "blend": [["palm_thumb", 0.4], ["thumb_membrane_left", 0.3], ["thumb_base", 0.3]]}
+///   ],
+///   "elements": [{"pill": ["index_base", "index_bottom"], "bone": "index_1"},
+///                {"wedge": ["palm_back", "palm_right", "palm_ring"], "bone": "palm"}],
+///   "keypoints": [{"name": "wrist", "joint": "wrist"},
+///                 {"name": "index_tip", "tip": "index_top", "bone": "index_3"}]
+/// }
+/// ```
+///
+/// - `bones`: parents before children; `rest` is the rest frame relative to the parent
+///   (rotation row-major); `dofs` lists the bone's DOFs in application order.
+/// - `dofs`: in pose-vector order; `kind` is `translation`, `global_rotation` or `rotation`.
+/// - `spheres`: `center` is in the model frame at the rest pose (converted to a bone offset on
+///   load); a blend sphere gives `[sphere, weight]` pairs of earlier bone-attached spheres and no
+///   radius (it is the blend of the parts' radii).
+/// - `elements`: sphere names (integer indices are accepted too).
+/// - `keypoints`: exactly the 21 of DESIGN.md, in order, with their names.
+///
+/// Unknown keys are ignored. Everything else is checked, and a bad file is refused with a
+/// [`ModelError`] naming the file, the field and the index.
 pub const TEMPLATE_FORMAT: &str = "hands.spheremesh";
 /// The current version of the template format.
 pub const TEMPLATE_VERSION: u32 = 1;
@@ -176,8 +178,8 @@ fn check_finite<'a>(
 }
 
 impl SphereMeshTemplate {
-    /// The template as a `hands.spheremesh` version-1 JSON document (see the [module
-    /// documentation](self)). Refused: an invalid template or a non-finite number.
+    /// The template as a `hands.spheremesh` version-1 JSON document (layout on
+    /// [`TEMPLATE_FORMAT`]). Refused: an invalid template or a non-finite number.
     pub fn to_json_string(&self) -> Result<String> {
         self.to_json_with_source(Path::new("<memory>"))
     }
