@@ -112,3 +112,55 @@ fn folder_bad_inputs_are_named() {
     assert!(open_sequence(&dir.join("nope")).is_err());
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+#[test]
+fn mcap_round_trip_and_corruption() {
+    let cam = Camera::new("test", 16, 12, 20.0, 21.0, 8.0, 6.0).expect("camera");
+    let dir = tmp("mcap");
+    std::fs::create_dir_all(&dir).expect("dir");
+    let path = dir.join("seq.mcap");
+    let input = frames(&cam, 4);
+    let mut w = create_sequence(&path, &cam).expect("create");
+    for (f, r) in &input {
+        w.write(f, Some(r)).expect("write");
+    }
+    w.finish().expect("finish");
+    let mut r = open_sequence(&path).expect("open");
+    let c = r.camera();
+    assert_eq!(
+        (c.width, c.height, c.fx, c.fy, c.cx, c.cy),
+        (cam.width, cam.height, cam.fx, cam.fy, cam.cx, cam.cy)
+    );
+    for (f, rec) in &input {
+        let (g, grec) = r.next_frame().expect("frame").expect("ok");
+        assert_eq!(&g.depth, &f.depth);
+        assert_eq!(&g.color, &f.color);
+        assert_eq!(grec.as_ref(), Some(rec));
+        assert!((g.timestamp - f.timestamp).abs() < 1e-9);
+    }
+    assert!(r.next_frame().is_none());
+    // Truncated file: an error at open or while reading, never a panic.
+    let bytes = std::fs::read(&path).expect("bytes");
+    for cut in [8, 100, bytes.len() / 2, bytes.len() - 10] {
+        let t = dir.join(format!("cut{cut}.mcap"));
+        std::fs::write(&t, &bytes[..cut]).expect("w");
+        let outcome = open_sequence(&t).map(|mut r| {
+            let mut n = 0;
+            while let Some(f) = r.next_frame() {
+                if f.is_err() {
+                    return Err(());
+                }
+                n += 1;
+            }
+            Ok(n)
+        });
+        match outcome {
+            Err(_) | Ok(Err(())) => {}
+            Ok(Ok(n)) => assert!(n < input.len(), "a truncated file gave all frames"),
+        }
+    }
+    // Garbage.
+    std::fs::write(dir.join("junk.mcap"), b"not an mcap file at all").expect("w");
+    assert!(open_sequence(&dir.join("junk.mcap")).is_err());
+    let _ = std::fs::remove_dir_all(&dir);
+}

@@ -1,6 +1,8 @@
 //! The `hands` command-line interface (DESIGN.md "CLI surface").
 
+mod convert;
 mod model;
+mod progress;
 
 use clap::{Parser, Subcommand};
 
@@ -17,11 +19,14 @@ enum Command {
     /// Inspect and export hand templates.
     #[command(subcommand)]
     Model(model::ModelCommand),
+    /// Convert a sequence between the folder format and MCAP.
+    Convert(convert::ConvertArgs),
 }
 
 fn main() -> anyhow::Result<()> {
     let cli = Cli::parse();
     match cli.command {
         Command::Model(cmd) => model::run(cmd),
+        Command::Convert(args) => convert::run(args),
     }
 }

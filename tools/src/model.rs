@@ -1,22 +1,28 @@
 //! `hands model …`: show and export templates.
 
 use std::fmt::Write as _;
+use std::path::Path;
 
-use anyhow::{bail, Result};
+use anyhow::{bail, Context, Result};
 use clap::Subcommand;
+use hand_model::cylinder::{default_right_hand_cylinders, load_htrack_calib, CylinderModel};
 use hand_model::keypoints::KEYPOINT_NAMES;
-use hand_model::kinematics::{DofKind, Pose};
+use hand_model::kinematics::{DofKind, Pose, Skeleton};
 use hand_model::shape::Element;
-use hand_model::spheremesh::{default_right_hand, PosedSphereMesh, ShapeBasis, SphereMeshTemplate};
+use hand_model::spheremesh::{
+    default_right_hand, import_hmodel_dir, PosedSphereMesh, ShapeBasis, SphereMeshTemplate,
+};
 
 /// Template subcommands.
 #[derive(Subcommand)]
 pub enum ModelCommand {
     /// Print a summary of a template: bones, DOFs with limits, spheres, elements, β.
     ///
-    /// Example: `hands model show default`
+    /// Examples: `hands model show default`, `hands model show me.json`,
+    /// `hands model show path/to/hmodel-model-dir` (C/R/B/I.txt), `hands model show default.calib`.
     Show {
-        /// `default` (the embedded right hand) or a template file.
+        /// `default`, `default-left`, `default-cylinders`, a template `.json`, an htrack
+        /// `.calib`, or a folder with the original hmodel/honline `C.txt R.txt B.txt I.txt`.
         template: String,
     },
 }
@@ -25,36 +31,61 @@ pub enum ModelCommand {
 pub fn run(cmd: ModelCommand) -> Result<()> {
     match cmd {
         ModelCommand::Show { template } => {
-            let t = load_template(&template)?;
-            print!("{}", summary(&t));
+            match load_any(&template)? {
+                AnyModel::SphereMesh(t) => print!("{}", summary(&t)),
+                AnyModel::Cylinders(c) => print!("{}", cylinder_summary(&c)),
+            }
             Ok(())
         }
     }
 }
 
-/// Resolve a template argument.
-pub fn load_template(spec: &str) -> Result<SphereMeshTemplate> {
+/// A template of either model.
+pub enum AnyModel {
+    /// A sphere-mesh template (Ch. 3–4).
+    SphereMesh(SphereMeshTemplate),
+    /// A cylinder model (Ch. 2).
+    Cylinders(CylinderModel),
+}
+
+/// Resolve a template argument of either model.
+pub fn load_any(spec: &str) -> Result<AnyModel> {
     match spec {
-        "default" | "default-right" => Ok(default_right_hand()),
-        "default-left" => Ok(default_right_hand().mirrored()?),
-        other => bail!("unknown template `{other}` (try `default`)"),
+        "default" | "default-right" => return Ok(AnyModel::SphereMesh(default_right_hand())),
+        "default-left" => return Ok(AnyModel::SphereMesh(default_right_hand().mirrored()?)),
+        "default-cylinders" => return Ok(AnyModel::Cylinders(default_right_hand_cylinders())),
+        _ => {}
+    }
+    let path = Path::new(spec);
+    if !path.exists() {
+        bail!("template `{spec}` is neither a built-in (default, default-left, default-cylinders) nor an existing file or folder");
+    }
+    if path.is_dir() {
+        let t = import_hmodel_dir(path)
+            .with_context(|| format!("importing the hmodel/honline files in {}", path.display()))?;
+        return Ok(AnyModel::SphereMesh(t));
+    }
+    match path.extension().and_then(|e| e.to_str()) {
+        Some("calib") => Ok(AnyModel::Cylinders(load_htrack_calib(path)?)),
+        Some("json") => Ok(AnyModel::SphereMesh(SphereMeshTemplate::load(path)?)),
+        _ => bail!(
+            "{}: unknown template file type (expected .json, .calib or a folder)",
+            path.display()
+        ),
     }
 }
 
-fn summary(t: &SphereMeshTemplate) -> String {
-    let sk = &t.skeleton;
-    let (pills, wedges) = t.element_counts();
-    let mut s = String::new();
-    let _ = writeln!(s, "template   {}", t.name);
-    let _ = writeln!(s, "handedness {:?}", t.handedness);
-    let _ = writeln!(
-        s,
-        "counts     {} bones, {} DOFs, {} spheres, {} elements ({pills} pills, {wedges} wedges)",
-        sk.bones().len(),
-        sk.num_dofs(),
-        t.spheres.len(),
-        t.elements.len()
-    );
+/// Resolve a sphere-mesh template argument.
+pub fn load_template(spec: &str) -> Result<SphereMeshTemplate> {
+    match load_any(spec)? {
+        AnyModel::SphereMesh(t) => Ok(t),
+        AnyModel::Cylinders(_) => {
+            bail!("`{spec}` is a cylinder model; this command needs a sphere-mesh template")
+        }
+    }
+}
+
+fn skeleton_summary(s: &mut String, sk: &Skeleton) {
     let _ = writeln!(s, "\nbones (name, parent, rest translation mm)");
     for b in sk.bones() {
         let parent = b.parent.map(|p| sk.bones()[p].name.as_str()).unwrap_or("-");
@@ -83,6 +114,56 @@ fn summary(t: &SphereMeshTemplate) -> String {
             sk.bones()[d.bone].name
         );
     }
+}
+
+fn cylinder_summary(c: &CylinderModel) -> String {
+    let mut s = String::new();
+    let _ = writeln!(s, "cylinder model {}", c.name);
+    let _ = writeln!(s, "handedness     {:?}", c.handedness);
+    let _ = writeln!(
+        s,
+        "counts         {} bones, {} DOFs, {} segments",
+        c.skeleton.bones().len(),
+        c.skeleton.num_dofs(),
+        c.segments.len()
+    );
+    skeleton_summary(&mut s, &c.skeleton);
+    let _ = writeln!(s, "\nsegments (index, bone, length, r1, r2, r1y, r2y mm)");
+    for (i, g) in c.segments.iter().enumerate() {
+        let _ = writeln!(
+            s,
+            "  {i:2} {:<10} {:7.2} {:6.2} {:6.2} {:6.2} {:6.2}",
+            c.skeleton.bones()[g.bone].name,
+            g.length,
+            g.r1,
+            g.r2,
+            g.r1y,
+            g.r2y
+        );
+    }
+    let rest = c.rest_posed();
+    let _ = writeln!(s, "\nkeypoints at the rest pose (mm)");
+    for (name, k) in KEYPOINT_NAMES.iter().zip(c.keypoints(&rest)) {
+        let _ = writeln!(s, "  {name:<10} ({:7.2}, {:7.2}, {:7.2})", k.x, k.y, k.z);
+    }
+    s
+}
+
+fn summary(t: &SphereMeshTemplate) -> String {
+    let sk = &t.skeleton;
+    let (pills, wedges) = t.element_counts();
+    let mut s = String::new();
+    let _ = writeln!(s, "template   {}", t.name);
+    let _ = writeln!(s, "handedness {:?}", t.handedness);
+    let _ = writeln!(
+        s,
+        "counts     {} bones, {} DOFs, {} spheres, {} elements ({pills} pills, {wedges} wedges)",
+        sk.bones().len(),
+        sk.num_dofs(),
+        t.spheres.len(),
+        t.elements.len()
+    );
+    skeleton_summary(&mut s, sk);
     let rest = PosedSphereMesh::new(t, &Pose::zeros(sk));
     let _ = writeln!(s, "\nspheres (index, name, rest center mm, radius mm)");
     for (i, (def, sp)) in t.spheres.iter().zip(&rest.spheres).enumerate() {
