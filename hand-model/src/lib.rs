@@ -14,3 +14,4 @@ pub mod math;
 pub use error::{ModelError, Result};
 pub mod keypoints;
 pub mod spheremesh;
+pub mod render;

@@ -1,0 +1,141 @@
+//! Binary glTF 2.0 (`.glb`) export of a [`TriMesh`], written by hand: the sphere-mesh surface of
+//! thesis Fig. 3.4 for web and desktop viewers.
+//!
+//! Layout: a 12-byte header (`glTF`, version 2, total length), a JSON chunk padded with spaces
+//! and a BIN chunk padded with zeros, both to 4 bytes. The BIN chunk holds, in this order and
+//! each 4-byte aligned, the positions (`f32` VEC3, accessor with `min`/`max` as glTF requires),
+//! the normals (`f32` VEC3, when there is one per vertex) and the indices (`u32` SCALAR), one
+//! buffer view each; one mesh with one triangle primitive, one node, one scene.
+//!
+//! glTF units are metres, so millimetre positions are divided by 1000; axes are kept (the model
+//! frame's +y toward the fingertips is glTF's up).
+
+use std::path::Path;
+
+use serde_json::json;
+
+use super::atomic::write_atomic;
+use super::mesh::TriMesh;
+use crate::error::{ModelError, Result};
+
+/// Magic number `glTF`.
+pub const GLB_MAGIC: u32 = 0x4654_6C67;
+/// Chunk type `JSON`.
+pub const CHUNK_JSON: u32 = 0x4E4F_534A;
+/// Chunk type `BIN\0`.
+pub const CHUNK_BIN: u32 = 0x004E_4942;
+
+const ARRAY_BUFFER: u32 = 34962;
+const ELEMENT_ARRAY_BUFFER: u32 = 34963;
+const FLOAT: u32 = 5126;
+const UNSIGNED_INT: u32 = 5125;
+const TRIANGLES: u32 = 4;
+
+fn push_f32s(bin: &mut Vec<u8>, values: impl Iterator<Item = f32>) {
+    for v in values {
+        bin.extend_from_slice(&v.to_le_bytes());
+    }
+}
+
+/// The `.glb` bytes of a mesh (positions converted from mm to m).
+///
+/// Errors: a triangle index out of range or a non-finite position. An empty mesh gives a valid
+/// file with an empty scene and no buffer.
+pub fn encode_glb(mesh: &TriMesh) -> Result<Vec<u8>> {
+    let bad = |reason: String| ModelError::InvalidArgument { name: "mesh", reason };
+    let nv = mesh.positions.len();
+    if let Some(t) = mesh.triangles.iter().find(|t| t.iter().any(|&i| i as usize >= nv)) {
+        return Err(bad(format!("triangle {t:?} refers past the {nv} vertices")));
+    }
+    if mesh.positions.iter().flatten().any(|x| !x.is_finite()) {
+        return Err(bad("non-finite vertex position".into()));
+    }
+    let asset = json!({ "version": "2.0", "generator": "hands hand-model render::glb" });
+    if mesh.triangles.is_empty() {
+        let doc = json!({ "asset": asset, "scene": 0, "scenes": [{ "nodes": [] }] });
+        return Ok(assemble(&doc.to_string(), &[]));
+    }
+    let positions: Vec<[f32; 3]> = mesh.positions.iter().map(|p| p.map(|x| x * 1e-3)).collect();
+    let mut lo = positions[0];
+    let mut hi = positions[0];
+    for p in &positions {
+        for k in 0..3 {
+            lo[k] = lo[k].min(p[k]);
+            hi[k] = hi[k].max(p[k]);
+        }
+    }
+    let with_normals = mesh.normals.len() == nv;
+    let mut bin = Vec::with_capacity(nv * 24 + mesh.triangles.len() * 12);
+    push_f32s(&mut bin, positions.iter().flatten().copied());
+    let pos_len = bin.len();
+    if with_normals {
+        push_f32s(&mut bin, mesh.normals.iter().flatten().copied());
+    }
+    let nrm_len = bin.len() - pos_len;
+    for i in mesh.triangles.iter().flatten() {
+        bin.extend_from_slice(&i.to_le_bytes());
+    }
+    let idx_len = bin.len() - pos_len - nrm_len;
+
+    let mut views = vec![json!({ "buffer": 0, "byteOffset": 0, "byteLength": pos_len, "target": ARRAY_BUFFER })];
+    let mut accessors = vec![json!({
+        "bufferView": 0, "componentType": FLOAT, "count": nv, "type": "VEC3",
+        "min": lo, "max": hi,
+    })];
+    let mut attributes = json!({ "POSITION": 0 });
+    if with_normals {
+        views.push(json!({ "buffer": 0, "byteOffset": pos_len, "byteLength": nrm_len, "target": ARRAY_BUFFER }));
+        accessors.push(json!({ "bufferView": 1, "componentType": FLOAT, "count": nv, "type": "VEC3" }));
+        attributes["NORMAL"] = json!(1);
+    }
+    views.push(json!({
+        "buffer": 0, "byteOffset": pos_len + nrm_len, "byteLength": idx_len, "target": ELEMENT_ARRAY_BUFFER,
+    }));
+    accessors.push(json!({
+        "bufferView": views.len() - 1, "componentType": UNSIGNED_INT,
+        "count": mesh.triangles.len() * 3, "type": "SCALAR",
+    }));
+    let doc = json!({
+        "asset": asset,
+        "scene": 0,
+        "scenes": [{ "nodes": [0] }],
+        "nodes": [{ "mesh": 0, "name": "sphere-mesh" }],
+        "meshes": [{
+            "name": "sphere-mesh",
+            "primitives": [{ "attributes": attributes, "indices": accessors.len() - 1, "mode": TRIANGLES }],
+        }],
+        "buffers": [{ "byteLength": bin.len() }],
+        "bufferViews": views,
+        "accessors": accessors,
+    });
+    Ok(assemble(&doc.to_string(), &bin))
+}
+
+/// Header + JSON chunk (space-padded) + BIN chunk (zero-padded, omitted when empty).
+fn assemble(json: &str, bin: &[u8]) -> Vec<u8> {
+    let mut json = json.as_bytes().to_vec();
+    while json.len() % 4 != 0 {
+        json.push(b' ');
+    }
+    let mut bin = bin.to_vec();
+    while bin.len() % 4 != 0 {
+        bin.push(0);
+    }
+    let total = 12 + 8 + json.len() + if bin.is_empty() { 0 } else { 8 + bin.len() };
+    let mut out = Vec::with_capacity(total);
+    for word in [GLB_MAGIC, 2, total as u32, json.len() as u32, CHUNK_JSON] {
+        out.extend_from_slice(&word.to_le_bytes());
+    }
+    out.extend_from_slice(&json);
+    if !bin.is_empty() {
+        out.extend_from_slice(&(bin.len() as u32).to_le_bytes());
+        out.extend_from_slice(&CHUNK_BIN.to_le_bytes());
+        out.extend_from_slice(&bin);
+    }
+    out
+}
+
+/// Write a mesh as `.glb`, atomically (temporary file in the same folder, then rename).
+pub fn write_glb(path: &Path, mesh: &TriMesh) -> Result<()> {
+    write_atomic(path, &encode_glb(mesh)?)
+}
