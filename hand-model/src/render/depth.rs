@@ -48,9 +48,17 @@ impl Intrinsics {
     /// Check that focal lengths are finite and positive, the principal point finite and the size
     /// in `1..=MAX_IMAGE_SIDE`.
     pub fn validate(&self) -> Result<()> {
-        let bad = |reason: String| Err(ModelError::InvalidArgument { name: "intrinsics", reason });
+        let bad = |reason: String| {
+            Err(ModelError::InvalidArgument {
+                name: "intrinsics",
+                reason,
+            })
+        };
         if !(self.fx.is_finite() && self.fx > 0.0 && self.fy.is_finite() && self.fy > 0.0) {
-            return bad(format!("focal lengths must be finite and > 0, got {} {}", self.fx, self.fy));
+            return bad(format!(
+                "focal lengths must be finite and > 0, got {} {}",
+                self.fx, self.fy
+            ));
         }
         if !(self.cx.is_finite() && self.cy.is_finite()) {
             return bad("principal point is not finite".into());
@@ -120,7 +128,10 @@ impl DepthRender {
 
     /// The depth as a DESIGN.md depth image: `u16` millimetres (rounded, saturated), 0 = none.
     pub fn depth_u16(&self) -> Vec<u16> {
-        self.depth.iter().map(|&z| z.round().clamp(0.0, u16::MAX as f32) as u16).collect()
+        self.depth
+            .iter()
+            .map(|&z| z.round().clamp(0.0, u16::MAX as f32) as u16)
+            .collect()
     }
 }
 
@@ -184,19 +195,25 @@ impl DepthRenderer {
         for ty in 0..th {
             for tx in 0..tw {
                 let tile = ty * tw + tx;
-                let items = &self.tile_items[self.tile_start[tile] as usize..self.tile_start[tile + 1] as usize];
+                let items = &self.tile_items
+                    [self.tile_start[tile] as usize..self.tile_start[tile + 1] as usize];
                 if items.is_empty() {
                     continue;
                 }
                 for v in ty * TILE..((ty + 1) * TILE).min(h) {
                     for u in tx * TILE..((tx + 1) * TILE).min(w) {
                         let ray = intrinsics.pixel_ray(u as f64, v as f64);
-                        let hit = cast_prepared(&ray, &self.prepared, items.iter().map(|&i| i as usize));
+                        let hit =
+                            cast_prepared(&ray, &self.prepared, items.iter().map(|&i| i as usize));
                         if let Some(hit) = hit {
                             let k = v * w + u;
                             out.depth[k] = hit.point.z as f32;
                             out.element[k] = hit.element as u32;
-                            out.normal[k] = [hit.normal.x as f32, hit.normal.y as f32, hit.normal.z as f32];
+                            out.normal[k] = [
+                                hit.normal.x as f32,
+                                hit.normal.y as f32,
+                                hit.normal.z as f32,
+                            ];
                         }
                     }
                 }
@@ -218,7 +235,12 @@ impl DepthRenderer {
                 let [ulo, uhi] = projected_range(c.x, c.z, b.radius, intr.fx, intr.cx);
                 let [vlo, vhi] = projected_range(c.y, c.z, b.radius, intr.fy, intr.cy);
                 // One pixel of slack on each side covers rounding in the projection.
-                let (ulo, uhi, vlo, vhi) = (ulo.floor() - 1.0, uhi.ceil() + 1.0, vlo.floor() - 1.0, vhi.ceil() + 1.0);
+                let (ulo, uhi, vlo, vhi) = (
+                    ulo.floor() - 1.0,
+                    uhi.ceil() + 1.0,
+                    vlo.floor() - 1.0,
+                    vhi.ceil() + 1.0,
+                );
                 if uhi < 0.0 || vhi < 0.0 || ulo > w - 1.0 || vlo > h - 1.0 {
                     None
                 } else {
@@ -236,7 +258,12 @@ impl DepthRenderer {
                 None
             };
             self.rects.push(rect.map_or([1, 0, 1, 0], |r| {
-                [r[0] / TILE as u32, r[1] / TILE as u32, r[2] / TILE as u32, r[3] / TILE as u32]
+                [
+                    r[0] / TILE as u32,
+                    r[1] / TILE as u32,
+                    r[2] / TILE as u32,
+                    r[3] / TILE as u32,
+                ]
             }));
         }
         self.tile_start.clear();
@@ -268,8 +295,165 @@ impl DepthRenderer {
 }
 
 /// Render a depth image with a fresh [`DepthRenderer`] (see [`DepthRenderer::render`]).
-pub fn render_depth(intrinsics: &Intrinsics, spheres: &[Sphere], elements: &[Element]) -> Result<DepthRender> {
+pub fn render_depth(
+    intrinsics: &Intrinsics,
+    spheres: &[Sphere],
+    elements: &[Element],
+) -> Result<DepthRender> {
     let mut out = DepthRender::default();
     DepthRenderer::new().render(intrinsics, spheres, elements, &mut out)?;
     Ok(out)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::kinematics::Pose;
+    use crate::render::cast_ray;
+    use crate::spheremesh::{default_right_hand, PosedSphereMesh};
+
+    fn intrinsics(width: u32, height: u32, f: f64) -> Intrinsics {
+        Intrinsics {
+            fx: f,
+            fy: f * 1.02,
+            cx: width as f64 * 0.5 - 0.3,
+            cy: height as f64 * 0.5 + 0.7,
+            width,
+            height,
+        }
+    }
+
+    fn posed_hand() -> (Vec<Sphere>, Vec<Element>) {
+        let t = default_right_hand();
+        let mut pose = Pose::zeros(&t.skeleton);
+        for (name, v) in [
+            ("global_tz", 420.0),
+            ("global_ty", -60.0),
+            ("global_rx", 0.3),
+            ("global_ry", -0.5),
+            ("index_mcp_flex", 0.6),
+            ("middle_pip_flex", 1.0),
+            ("thumb_cmc_abd", 0.3),
+        ] {
+            pose.set(&t.skeleton, name, v).unwrap();
+        }
+        let posed = PosedSphereMesh::new(&t, &pose);
+        (
+            posed.spheres,
+            t.elements.iter().map(|e| e.element).collect(),
+        )
+    }
+
+    fn brute(intr: &Intrinsics, spheres: &[Sphere], elements: &[Element]) -> DepthRender {
+        let mut out = DepthRender::default();
+        out.reset(intr.width, intr.height);
+        for v in 0..intr.height as usize {
+            for u in 0..intr.width as usize {
+                let ray = intr.pixel_ray(u as f64, v as f64);
+                if let Some(hit) = cast_ray(&ray, spheres, elements) {
+                    let k = v * intr.width as usize + u;
+                    out.depth[k] = hit.point.z as f32;
+                    out.element[k] = hit.element as u32;
+                    out.normal[k] = [
+                        hit.normal.x as f32,
+                        hit.normal.y as f32,
+                        hit.normal.z as f32,
+                    ];
+                }
+            }
+        }
+        out
+    }
+
+    #[test]
+    fn tiled_render_equals_per_pixel_ray_casting() {
+        let (mut spheres, mut elements) = posed_hand();
+        // An element straddling the camera plane (every tile) and one behind the camera.
+        let n = spheres.len() as u32;
+        spheres.push(Sphere::new(Vector3::new(-150.0, 80.0, -20.0), 10.0));
+        spheres.push(Sphere::new(Vector3::new(-90.0, 60.0, 200.0), 12.0));
+        spheres.push(Sphere::new(Vector3::new(0.0, 0.0, -300.0), 10.0));
+        elements.push(Element::Pill([n, n + 1]));
+        elements.push(Element::Pill([n + 2, n + 2]));
+        let mut renderer = DepthRenderer::new();
+        let mut out = DepthRender::default();
+        for intr in [
+            intrinsics(160, 120, 150.0),
+            intrinsics(101, 77, 80.0),
+            intrinsics(16, 16, 20.0),
+        ] {
+            renderer
+                .render(&intr, &spheres, &elements, &mut out)
+                .unwrap();
+            let expect = brute(&intr, &spheres, &elements);
+            assert_eq!(out, expect);
+            let hits = out.hit_count();
+            assert!(hits > (intr.width * intr.height / 20) as usize, "{hits}");
+            assert!(hits < (intr.width * intr.height) as usize);
+        }
+    }
+
+    #[test]
+    fn single_sphere_has_analytic_depth() {
+        let c = Vector3::new(10.0, -5.0, 400.0);
+        let spheres = [Sphere::new(c, 30.0)];
+        let intr = intrinsics(64, 48, 60.0);
+        let out = render_depth(&intr, &spheres, &[Element::Pill([0, 0])]).unwrap();
+        let mut inside = 0;
+        for v in 0..48 {
+            for u in 0..64 {
+                let d = intr.pixel_ray(u as f64, v as f64).dir;
+                let b = d.dot(&c);
+                let disc = 900.0 - (c - d * b).norm_squared();
+                let k = v * 64 + u;
+                if disc > 1e-3 {
+                    inside += 1;
+                    let z = (b - disc.sqrt()) * d.z;
+                    assert!(
+                        (out.depth[k] as f64 - z).abs() < 1e-3,
+                        "{u} {v}: {} vs {z}",
+                        out.depth[k]
+                    );
+                    assert_eq!(out.element[k], 0);
+                    let p = d * (b - disc.sqrt());
+                    let n = (p - c) / 30.0;
+                    let got = Vector3::from(out.normal[k].map(|x| x as f64));
+                    assert!((got - n).norm() < 1e-5);
+                } else if disc < -1e-3 {
+                    assert_eq!((out.depth[k], out.element[k]), (0.0, NO_ELEMENT));
+                }
+            }
+        }
+        assert!(inside > 20, "{inside}");
+        assert_eq!(
+            out.depth_u16()[24 * 64 + 32],
+            out.depth[24 * 64 + 32].round() as u16
+        );
+    }
+
+    #[test]
+    fn rejects_invalid_input() {
+        let spheres = [Sphere::new(Vector3::new(0.0, 0.0, 100.0), 5.0)];
+        let ok = intrinsics(32, 32, 30.0);
+        for bad in [
+            Intrinsics { fx: f64::NAN, ..ok },
+            Intrinsics { fy: -1.0, ..ok },
+            Intrinsics {
+                cx: f64::INFINITY,
+                ..ok
+            },
+            Intrinsics { width: 0, ..ok },
+            Intrinsics {
+                height: MAX_IMAGE_SIDE + 1,
+                ..ok
+            },
+        ] {
+            assert!(render_depth(&bad, &spheres, &[]).is_err());
+        }
+        assert!(render_depth(&ok, &spheres, &[Element::Pill([0, 1])]).is_err());
+        let nan = [Sphere::new(Vector3::new(0.0, f64::NAN, 100.0), 5.0)];
+        assert!(render_depth(&ok, &nan, &[Element::Pill([0, 0])]).is_err());
+        let empty = render_depth(&ok, &spheres, &[]).unwrap();
+        assert_eq!(empty.hit_count(), 0);
+    }
 }

@@ -112,7 +112,11 @@ impl Grid {
 /// Errors: a cell size that is not finite or below 0.05 mm, an element with an out-of-range index
 /// or an invalid sphere (non-finite, negative radius), or a grid above [`MAX_GRID_NODES`]. No
 /// element gives an empty mesh.
-pub fn extract_mesh(spheres: &[Sphere], elements: &[Element], options: &MeshOptions) -> Result<TriMesh> {
+pub fn extract_mesh(
+    spheres: &[Sphere],
+    elements: &[Element],
+    options: &MeshOptions,
+) -> Result<TriMesh> {
     let cell = options.cell_mm;
     if !(cell.is_finite() && cell >= 0.05) {
         return Err(ModelError::InvalidArgument {
@@ -142,10 +146,12 @@ pub fn extract_mesh(spheres: &[Sphere], elements: &[Element], options: &MeshOpti
     let extent = hi - lo + V3::repeat(3.0 * cell);
     let dims = extent.map(|e| (e / cell).ceil() + 1.0);
     let total = dims.x * dims.y * dims.z;
-    if !(total <= MAX_GRID_NODES as f64) {
+    if total.is_nan() || total > MAX_GRID_NODES as f64 {
         return Err(ModelError::InvalidArgument {
             name: "cell_mm",
-            reason: format!("a {cell} mm grid over this model needs {total:.0} nodes (max {MAX_GRID_NODES})"),
+            reason: format!(
+                "a {cell} mm grid over this model needs {total:.0} nodes (max {MAX_GRID_NODES})"
+            ),
         });
     }
     let grid = Grid {
@@ -225,19 +231,28 @@ pub fn extract_mesh(spheres: &[Sphere], elements: &[Element], options: &MeshOpti
                     let edges: &[(usize, usize)] = match ni {
                         1 => &[(outs[0], ins[0]), (outs[1], ins[0]), (outs[2], ins[0])],
                         3 => &[(outs[0], ins[0]), (outs[0], ins[1]), (outs[0], ins[2])],
-                        2 => &[(outs[0], ins[0]), (outs[1], ins[0]), (outs[1], ins[1]), (outs[0], ins[1])],
+                        2 => &[
+                            (outs[0], ins[0]),
+                            (outs[1], ins[0]),
+                            (outs[1], ins[1]),
+                            (outs[0], ins[1]),
+                        ],
                         _ => continue,
                     };
                     // Orientation from the edge midpoints (never degenerate), facing outward.
                     let mid = |e: (usize, usize)| (grid.position(e.0) + grid.position(e.1)) * 0.5;
                     let dir = mean(&outs[..no], &grid) - mean(&ins[..ni], &grid);
-                    let normal = (mid(edges[1]) - mid(edges[0])).cross(&(mid(edges[2]) - mid(edges[0])));
+                    let normal =
+                        (mid(edges[1]) - mid(edges[0])).cross(&(mid(edges[2]) - mid(edges[0])));
                     let flip = normal.dot(&dir) < 0.0;
                     let ids: [u32; 4] = std::array::from_fn(|q| match edges.get(q) {
                         Some(&(a, b)) => vertex(a, b, &mut mesh),
                         None => 0,
                     });
-                    let mut push = |t: [u32; 3]| mesh.triangles.push(if flip { [t[0], t[2], t[1]] } else { t });
+                    let mut push = |t: [u32; 3]| {
+                        mesh.triangles
+                            .push(if flip { [t[0], t[2], t[1]] } else { t })
+                    };
                     push([ids[0], ids[1], ids[2]]);
                     if edges.len() == 4 {
                         push([ids[0], ids[2], ids[3]]);
@@ -251,4 +266,121 @@ pub fn extract_mesh(spheres: &[Sphere], elements: &[Element], options: &MeshOpti
 
 fn mean(nodes: &[usize], grid: &Grid) -> V3 {
     nodes.iter().map(|&n| grid.position(n)).sum::<V3>() / nodes.len() as f64
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::kinematics::Pose;
+    use crate::render::testutil::{brute_sdf, skeleton_samples};
+    use crate::spheremesh::{default_right_hand, PosedSphereMesh};
+
+    fn default_hand() -> (Vec<Sphere>, Vec<Element>) {
+        let t = default_right_hand();
+        let posed = PosedSphereMesh::new(&t, &Pose::zeros(&t.skeleton));
+        (
+            posed.spheres,
+            t.elements.iter().map(|e| e.element).collect(),
+        )
+    }
+
+    /// Every directed edge appears once and its reverse once: closed and consistently oriented.
+    fn assert_closed_oriented(mesh: &TriMesh) {
+        let mut directed: HashMap<(u32, u32), u32> = HashMap::new();
+        for t in &mesh.triangles {
+            for k in 0..3 {
+                *directed.entry((t[k], t[(k + 1) % 3])).or_default() += 1;
+            }
+        }
+        for (&(a, b), &count) in &directed {
+            assert_eq!(count, 1, "edge {a}→{b} used {count} times");
+            assert_eq!(directed.get(&(b, a)), Some(&1), "edge {a}→{b} has no twin");
+        }
+    }
+
+    fn signed_volume(mesh: &TriMesh) -> f64 {
+        let p = |i: u32| Vector3::from(mesh.positions[i as usize].map(|x| x as f64));
+        mesh.triangles
+            .iter()
+            .map(|t| p(t[0]).dot(&p(t[1]).cross(&p(t[2]))) / 6.0)
+            .sum()
+    }
+
+    #[test]
+    fn sphere_mesh_is_closed_outward_and_on_the_surface() {
+        let c = Vector3::new(3.0, -2.0, 10.0);
+        let spheres = [Sphere::new(c, 12.0)];
+        let mesh = extract_mesh(
+            &spheres,
+            &[Element::Pill([0, 0])],
+            &MeshOptions { cell_mm: 1.0 },
+        )
+        .unwrap();
+        assert!(mesh.triangles.len() > 1000);
+        assert_closed_oriented(&mesh);
+        for (p, n) in mesh.positions.iter().zip(&mesh.normals) {
+            let p = Vector3::from(p.map(|x| x as f64));
+            assert!(((p - c).norm() - 12.0).abs() < 1e-4);
+            let n = Vector3::from(n.map(|x| x as f64));
+            assert!((n - (p - c) / 12.0).norm() < 1e-4);
+        }
+        let v = signed_volume(&mesh);
+        let exact = 4.0 / 3.0 * std::f64::consts::PI * 12.0f64.powi(3);
+        assert!(v > 0.97 * exact && v <= exact, "{v} vs {exact}");
+    }
+
+    #[test]
+    fn default_hand_mesh_is_watertight_and_on_the_surface() {
+        let (spheres, elements) = default_hand();
+        let mesh = extract_mesh(&spheres, &elements, &MeshOptions { cell_mm: 3.0 }).unwrap();
+        assert!(mesh.triangles.len() > 5000, "{}", mesh.triangles.len());
+        assert_eq!(mesh.normals.len(), mesh.positions.len());
+        assert_closed_oriented(&mesh);
+        assert!(signed_volume(&mesh) > 1e5);
+        for n in &mesh.normals {
+            let len = n.iter().map(|x| x * x).sum::<f32>().sqrt();
+            assert!((len - 1.0).abs() < 1e-5, "{len}");
+        }
+        // Signed distance to the union of densely sampled elements, on a subset of the vertices.
+        let samples: Vec<Vec<Sphere>> = elements
+            .iter()
+            .map(|e| skeleton_samples(&spheres, e, 0.5))
+            .collect();
+        let prepared: Vec<PreparedElement> = elements
+            .iter()
+            .map(|e| PreparedElement::new(&spheres, e).unwrap())
+            .collect();
+        let mut worst = 0.0f64;
+        for p in mesh.positions.iter().step_by(7) {
+            let p = Vector3::from(p.map(|x| x as f64));
+            let mut d = f64::INFINITY;
+            for (s, pe) in samples.iter().zip(&prepared) {
+                let b = pe.bounds();
+                if (p - b.center).norm() - b.radius < d.min(1.0) {
+                    d = d.min(brute_sdf(s, &p));
+                }
+            }
+            worst = worst.max(d.abs());
+        }
+        assert!(worst < 0.5, "worst |sdf| {worst} mm");
+    }
+
+    #[test]
+    fn invalid_options_and_elements_are_rejected() {
+        let (spheres, elements) = default_hand();
+        for cell in [0.0, -1.0, f64::NAN, f64::INFINITY, 0.01] {
+            assert!(extract_mesh(&spheres, &elements, &MeshOptions { cell_mm: cell }).is_err());
+        }
+        assert!(extract_mesh(
+            &spheres,
+            &[Element::Pill([0, 999])],
+            &MeshOptions::default()
+        )
+        .is_err());
+        let huge = [Sphere::new(Vector3::zeros(), 1e6)];
+        assert!(extract_mesh(&huge, &[Element::Pill([0, 0])], &MeshOptions::default()).is_err());
+        assert!(extract_mesh(&spheres, &[], &MeshOptions::default())
+            .unwrap()
+            .is_empty());
+    }
 }

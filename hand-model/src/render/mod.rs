@@ -22,4 +22,6 @@ mod testutil;
 pub use depth::{render_depth, DepthRender, DepthRenderer, Intrinsics, NO_ELEMENT};
 pub use mesh::{extract_mesh, MeshOptions, TriMesh};
 pub use prepared::PreparedElement;
-pub use raycast::{cast_ray, cast_ray_element, cast_ray_pill, cast_ray_wedge, Ray, RayHit, SurfaceHit};
+pub use raycast::{
+    cast_ray, cast_ray_element, cast_ray_pill, cast_ray_wedge, Ray, RayHit, SurfaceHit,
+};

@@ -43,3 +43,62 @@ pub fn encode_obj(mesh: &TriMesh) -> String {
 pub fn write_obj(path: &Path, mesh: &TriMesh) -> Result<()> {
     write_atomic(path, encode_obj(mesh).as_bytes())
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::render::{extract_mesh, MeshOptions};
+    use crate::shape::{Element, Sphere};
+    use nalgebra::Vector3;
+
+    fn small_mesh() -> TriMesh {
+        let spheres = [
+            Sphere::new(Vector3::new(0.0, 0.0, 0.0), 8.0),
+            Sphere::new(Vector3::new(0.0, 30.0, 2.0), 5.0),
+        ];
+        extract_mesh(
+            &spheres,
+            &[Element::Pill([0, 1])],
+            &MeshOptions { cell_mm: 2.0 },
+        )
+        .unwrap()
+    }
+
+    #[test]
+    fn obj_parses_back() {
+        let mesh = small_mesh();
+        let dir = std::env::temp_dir().join(format!("hands-obj-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let path = dir.join("pill.obj");
+        write_obj(&path, &mesh).unwrap();
+        let text = std::fs::read_to_string(&path).unwrap();
+        let (mut v, mut vn, mut f) = (vec![], vec![], vec![]);
+        for line in text.lines() {
+            let mut it = line.split_whitespace();
+            match it.next() {
+                Some("v") => v.push(it.map(|x| x.parse::<f32>().unwrap()).collect::<Vec<_>>()),
+                Some("vn") => vn.push(it.map(|x| x.parse::<f32>().unwrap()).collect::<Vec<_>>()),
+                Some("f") => f.push(
+                    it.map(|x| {
+                        let (a, b) = x.split_once("//").unwrap();
+                        assert_eq!(a, b);
+                        a.parse::<u32>().unwrap() - 1
+                    })
+                    .collect::<Vec<_>>(),
+                ),
+                Some("#") | None => {}
+                Some(other) => panic!("unexpected record {other}"),
+            }
+        }
+        assert_eq!(v.len(), mesh.positions.len());
+        assert_eq!(vn.len(), mesh.normals.len());
+        assert_eq!(f.len(), mesh.triangles.len());
+        for (a, b) in v.iter().zip(&mesh.positions) {
+            assert_eq!(a.as_slice(), b.as_slice());
+        }
+        for (a, b) in f.iter().zip(&mesh.triangles) {
+            assert_eq!(a.as_slice(), b.as_slice());
+        }
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+}

@@ -43,11 +43,11 @@ impl Cone {
     pub(crate) fn new(a: &Sphere, b: &Sphere) -> Option<Cone> {
         let e = b.center - a.center;
         let len = e.norm();
-        if !(len > 0.0) {
+        if len.is_nan() || len <= 0.0 {
             return None;
         }
         let sin = (a.radius - b.radius) / len;
-        if !(sin.abs() < 1.0 - 1e-12) {
+        if sin.is_nan() || sin.abs() >= 1.0 - 1e-12 {
             return None;
         }
         let cos = (1.0 - sin * sin).sqrt();
@@ -235,7 +235,9 @@ impl PreparedElement {
             for f in faces {
                 let q = f.skew(&c1, p);
                 if q.x >= 0.0 && in_triangle(&q) {
-                    let r = self.radius_plane[0] + q.y * self.radius_plane[1] + q.z * self.radius_plane[2];
+                    let r = self.radius_plane[0]
+                        + q.y * self.radius_plane[1]
+                        + q.z * self.radius_plane[2];
                     best = best.min(q.x - r);
                 }
             }
@@ -279,7 +281,7 @@ fn tangent_faces(a: &Sphere, b: &Sphere, c: &Sphere) -> Option<[Face; 2]> {
     let e3 = c.center - a.center;
     let (g00, g01, g11) = (e2.dot(&e2), e2.dot(&e3), e3.dot(&e3));
     let det = g00 * g11 - g01 * g01;
-    if !(det > 1e-10 * g00 * g11) {
+    if det.is_nan() || det <= 1e-10 * g00 * g11 {
         return None;
     }
     let (k2, k3) = (a.radius - b.radius, a.radius - c.radius);
@@ -287,7 +289,7 @@ fn tangent_faces(a: &Sphere, b: &Sphere, c: &Sphere) -> Option<[Face; 2]> {
     let beta = (g00 * k3 - g01 * k2) / det;
     let n0 = e2 * alpha + e3 * beta;
     let h2 = 1.0 - n0.norm_squared();
-    if !(h2 > 1e-10) {
+    if h2.is_nan() || h2 <= 1e-10 {
         return None;
     }
     let m = e2.cross(&e3).normalize();

@@ -126,7 +126,9 @@ pub fn bone_color(name: &str) -> [u8; 3] {
         "palm" | "root" => [225.0, 188.0, 165.0],
         "wrist" => [165.0, 150.0, 145.0],
         other => {
-            let h = other.bytes().fold(7u32, |h, b| h.wrapping_mul(31).wrapping_add(b as u32));
+            let h = other
+                .bytes()
+                .fold(7u32, |h, b| h.wrapping_mul(31).wrapping_add(b as u32));
             let hue = (h % 360) as f64 / 60.0;
             let x = 1.0 - (hue % 2.0 - 1.0).abs();
             let (r, g, b) = match hue as u32 {
@@ -150,7 +152,12 @@ pub fn bone_color(name: &str) -> [u8; 3] {
 
 /// Shade a render: Lambert with a head light, `0.2 + 0.8·max(0, −n·d)` times the element's
 /// color (`colors[element]`, grey when missing), `background` elsewhere.
-pub fn shade(render: &DepthRender, intrinsics: &Intrinsics, colors: &[[u8; 3]], background: [u8; 3]) -> RgbImage {
+pub fn shade(
+    render: &DepthRender,
+    intrinsics: &Intrinsics,
+    colors: &[[u8; 3]],
+    background: [u8; 3],
+) -> RgbImage {
     let mut img = RgbImage::from_pixel(render.width, render.height, image::Rgb(background));
     for (k, &e) in render.element.iter().enumerate() {
         if e == NO_ELEMENT {
@@ -162,7 +169,11 @@ pub fn shade(render: &DepthRender, intrinsics: &Intrinsics, colors: &[[u8; 3]], 
         let lambert = -(n[0] as f64 * d.x + n[1] as f64 * d.y + n[2] as f64 * d.z);
         let light = 0.2 + 0.8 * lambert.clamp(0.0, 1.0);
         let base = colors.get(e as usize).copied().unwrap_or([180, 180, 180]);
-        img.put_pixel(u, v, image::Rgb(base.map(|c| (c as f64 * light).round() as u8)));
+        img.put_pixel(
+            u,
+            v,
+            image::Rgb(base.map(|c| (c as f64 * light).round() as u8)),
+        );
     }
     img
 }
@@ -182,8 +193,14 @@ pub struct Preview {
 ///
 /// The framing uses the posed spheres as if the pose's global transform were the model frame, so
 /// any global rotation changes the view; use zero global DOFs for the canonical views.
-pub fn render_preview(template: &SphereMeshTemplate, pose: &Pose, options: &PreviewOptions) -> Result<Preview> {
-    if pose.values.len() != template.skeleton.num_dofs() || pose.values.iter().any(|v| !v.is_finite()) {
+pub fn render_preview(
+    template: &SphereMeshTemplate,
+    pose: &Pose,
+    options: &PreviewOptions,
+) -> Result<Preview> {
+    if pose.values.len() != template.skeleton.num_dofs()
+        || pose.values.iter().any(|v| !v.is_finite())
+    {
         return Err(ModelError::InvalidArgument {
             name: "pose",
             reason: "wrong length or non-finite value".into(),
@@ -194,7 +211,12 @@ pub fn render_preview(template: &SphereMeshTemplate, pose: &Pose, options: &Prev
     let spheres: Vec<Sphere> = posed
         .spheres
         .iter()
-        .map(|s| Sphere::new(framing.camera_from_model.transform_point(&s.center), s.radius))
+        .map(|s| {
+            Sphere::new(
+                framing.camera_from_model.transform_point(&s.center),
+                s.radius,
+            )
+        })
         .collect();
     let elements: Vec<Element> = template.elements.iter().map(|e| e.element).collect();
     let colors: Vec<[u8; 3]> = template
@@ -205,14 +227,23 @@ pub fn render_preview(template: &SphereMeshTemplate, pose: &Pose, options: &Prev
     let mut render = DepthRender::default();
     DepthRenderer::new().render(&framing.intrinsics, &spheres, &elements, &mut render)?;
     let image = shade(&render, &framing.intrinsics, &colors, options.background);
-    Ok(Preview { image, render, framing })
+    Ok(Preview {
+        image,
+        render,
+        framing,
+    })
 }
 
 /// PNG bytes of an RGB image.
 pub fn encode_png(image: &RgbImage) -> Result<Vec<u8>> {
     let mut bytes = Vec::new();
     image::codecs::png::PngEncoder::new(&mut bytes)
-        .write_image(image.as_raw(), image.width(), image.height(), ExtendedColorType::Rgb8)
+        .write_image(
+            image.as_raw(),
+            image.width(),
+            image.height(),
+            ExtendedColorType::Rgb8,
+        )
         .map_err(|e| ModelError::InvalidArgument {
             name: "image",
             reason: e.to_string(),
@@ -226,6 +257,141 @@ pub fn write_png(path: &Path, image: &RgbImage) -> Result<()> {
 }
 
 /// [`render_preview`] then [`write_png`].
-pub fn write_preview_png(path: &Path, template: &SphereMeshTemplate, pose: &Pose, options: &PreviewOptions) -> Result<()> {
+pub fn write_preview_png(
+    path: &Path,
+    template: &SphereMeshTemplate,
+    pose: &Pose,
+    options: &PreviewOptions,
+) -> Result<()> {
     write_png(path, &render_preview(template, pose, options)?.image)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::spheremesh::default_right_hand;
+
+    /// Mean pixel `(u, v)` of the elements whose bone name starts with `digit`.
+    fn mean_pixel(template: &SphereMeshTemplate, r: &DepthRender, digit: &str) -> (f64, f64) {
+        let (mut su, mut sv, mut n) = (0.0, 0.0, 0.0);
+        for (k, &e) in r.element.iter().enumerate() {
+            let bone = e != NO_ELEMENT
+                && template.skeleton.bones()[template.elements[e as usize].bone]
+                    .name
+                    .starts_with(digit);
+            if bone {
+                su += (k as u32 % r.width) as f64;
+                sv += (k as u32 / r.width) as f64;
+                n += 1.0;
+            }
+        }
+        assert!(n > 20.0, "{digit}: {n} pixels");
+        (su / n, sv / n)
+    }
+
+    #[test]
+    fn default_hand_preview_is_plausible_and_decodes() {
+        let template = default_right_hand();
+        let pose = Pose::zeros(&template.skeleton);
+        let preview = render_preview(&template, &pose, &PreviewOptions::default()).unwrap();
+        let r = &preview.render;
+        let fraction = r.hit_count() as f64 / (r.width * r.height) as f64;
+        assert!((0.08..0.6).contains(&fraction), "hand covers {fraction}");
+        // Palm view of a right hand: the thumb is on the image's right of the pinky, fingers up.
+        let m = |d| mean_pixel(&template, r, d);
+        let (thumb, pinky, middle, wrist) = (m("thumb"), m("pinky"), m("middle"), m("wrist"));
+        assert!(thumb.0 > pinky.0 + 50.0, "thumb {thumb:?} pinky {pinky:?}");
+        assert!(
+            middle.1 < wrist.1 - 100.0,
+            "middle {middle:?} wrist {wrist:?}"
+        );
+        // Hand pixels face the camera: their normals point back toward it.
+        for (k, &e) in r.element.iter().enumerate() {
+            if e != NO_ELEMENT {
+                let d = preview
+                    .framing
+                    .intrinsics
+                    .pixel_ray((k as u32 % r.width) as f64, (k as u32 / r.width) as f64)
+                    .dir;
+                let n = r.normal[k];
+                assert!(n[0] as f64 * d.x + n[1] as f64 * d.y + n[2] as f64 * d.z <= 1e-6);
+            }
+        }
+
+        let dir = std::env::temp_dir().join(format!("hands-preview-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let path = dir.join("hand.png");
+        write_preview_png(&path, &template, &pose, &PreviewOptions::default()).unwrap();
+        let decoded = image::load_from_memory_with_format(
+            &std::fs::read(&path).unwrap(),
+            image::ImageFormat::Png,
+        )
+        .unwrap();
+        assert_eq!((decoded.width(), decoded.height()), (640, 480));
+        assert_eq!(decoded.to_rgb8(), preview.image);
+        assert_eq!(
+            *preview.image.get_pixel(0, 0),
+            image::Rgb(PreviewOptions::default().background)
+        );
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    #[test]
+    fn back_view_shows_the_thumb_on_the_left() {
+        let template = default_right_hand();
+        let pose = Pose::zeros(&template.skeleton);
+        let palm = render_preview(
+            &template,
+            &pose,
+            &PreviewOptions {
+                width: 160,
+                height: 120,
+                ..Default::default()
+            },
+        )
+        .unwrap();
+        let back = render_preview(
+            &template,
+            &pose,
+            &PreviewOptions {
+                width: 160,
+                height: 120,
+                side: ViewSide::Back,
+                ..Default::default()
+            },
+        )
+        .unwrap();
+        // About the same silhouette, mirrored (perspective and the different near sides differ).
+        let (a, b) = (
+            palm.render.hit_count() as f64,
+            back.render.hit_count() as f64,
+        );
+        assert!((a - b).abs() < 0.2 * a, "{a} vs {b}");
+        let (thumb, pinky) = (
+            mean_pixel(&template, &back.render, "thumb"),
+            mean_pixel(&template, &back.render, "pinky"),
+        );
+        assert!(thumb.0 < pinky.0 - 10.0, "thumb {thumb:?} pinky {pinky:?}");
+    }
+
+    #[test]
+    fn invalid_input_is_rejected() {
+        let template = default_right_hand();
+        let mut pose = Pose::zeros(&template.skeleton);
+        pose.values[7] = f64::NAN;
+        assert!(render_preview(&template, &pose, &PreviewOptions::default()).is_err());
+        let pose = Pose::zeros(&template.skeleton);
+        assert!(render_preview(
+            &template,
+            &pose,
+            &PreviewOptions {
+                width: 0,
+                ..Default::default()
+            }
+        )
+        .is_err());
+        assert!(frame_model(&[], 64, 48, ViewSide::Palm).is_err());
+        assert_eq!(bone_color("thumb_2"), [225, 85, 75]);
+        assert_ne!(bone_color("mystery"), bone_color("other"));
+    }
 }

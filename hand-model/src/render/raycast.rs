@@ -39,7 +39,12 @@ impl Ray {
 
     /// A ray over `t ∈ [t_min, t_max]` with `dir` normalized; `None` for non-finite input (except
     /// `t_max = +∞`), a zero direction or `t_min > t_max`.
-    pub fn segment(origin: Vector3<f64>, dir: Vector3<f64>, t_min: f64, t_max: f64) -> Option<Self> {
+    pub fn segment(
+        origin: Vector3<f64>,
+        dir: Vector3<f64>,
+        t_min: f64,
+        t_max: f64,
+    ) -> Option<Self> {
         let n = dir.norm();
         let ray = Self {
             origin,
@@ -102,7 +107,7 @@ fn quadratic(a: f64, b: f64, c: f64) -> [Option<f64>; 2] {
         return [Some(-c / (2.0 * b)), None];
     }
     let disc = b * b - a * c;
-    if !(disc >= 0.0) {
+    if disc.is_nan() || disc < 0.0 {
         return [None, None];
     }
     let q = -(b + disc.sqrt().copysign(b));
@@ -115,14 +120,14 @@ fn quadratic(a: f64, b: f64, c: f64) -> [Option<f64>; 2] {
 /// Entry of the line `o + t·d` (unit `d`) into a ball: `(t, outward normal)`.
 #[inline]
 fn ball_entry(s: &Sphere, o: &V3, d: &V3) -> Option<(f64, V3)> {
-    if !(s.radius > 0.0) {
+    if s.radius.is_nan() || s.radius <= 0.0 {
         return None;
     }
     let w = o - s.center;
     let b = w.dot(d);
     // r² − (distance from the center to the line)², stable for far origins.
     let disc = s.radius * s.radius - (w - d * b).norm_squared();
-    if !(disc >= 0.0) {
+    if disc.is_nan() || disc < 0.0 {
         return None;
     }
     let t = -b - disc.sqrt();
@@ -173,7 +178,7 @@ impl PreparedElement {
             let c1 = self.spheres[0].center;
             for f in faces {
                 let denom = f.normal.dot(d);
-                if !(denom < -1e-12) {
+                if denom.is_nan() || denom >= -1e-12 {
                     continue;
                 }
                 let t = (f.offset - f.normal.dot(o)) / denom;
@@ -203,7 +208,7 @@ impl PreparedElement {
         let w = ray.origin - b.center;
         let bb = w.dot(&ray.dir);
         let disc = b.radius * b.radius - (w - ray.dir * bb).norm_squared();
-        if !(disc >= 0.0) {
+        if disc.is_nan() || disc < 0.0 {
             return None;
         }
         let sq = disc.sqrt();
@@ -323,10 +328,16 @@ mod tests {
             let h = p.cast(&ray).unwrap();
             assert!((h.t - t).abs() < 1e-9, "{} vs {t}", h.t);
             assert!(((h.point - c.center).norm() - 20.0).abs() < 1e-9);
-            assert!(p.cast(&Ray::new(V3::zeros(), V3::new(0.05, 0.0, 1.0)).unwrap()).is_none());
+            assert!(p
+                .cast(&Ray::new(V3::zeros(), V3::new(0.05, 0.0, 1.0)).unwrap())
+                .is_none());
             // Segment limits: ends before the sphere, or starts inside it.
-            assert!(p.cast(&Ray::segment(V3::zeros(), V3::z(), 0.0, 479.0).unwrap()).is_none());
-            assert!(p.cast(&Ray::segment(V3::zeros(), V3::z(), 490.0, 1e9).unwrap()).is_none());
+            assert!(p
+                .cast(&Ray::segment(V3::zeros(), V3::z(), 0.0, 479.0).unwrap())
+                .is_none());
+            assert!(p
+                .cast(&Ray::segment(V3::zeros(), V3::z(), 490.0, 1e9).unwrap())
+                .is_none());
         }
     }
 
@@ -343,18 +354,29 @@ mod tests {
                 300.0 - (12.0 - sx * sin) / cos
             } else if sx < 12.0 * sin {
                 let dx: f64 = x + 30.0;
-                if dx.abs() > 12.0 { continue } else { 300.0 - (144.0 - dx * dx).sqrt() }
+                if dx.abs() > 12.0 {
+                    continue;
+                } else {
+                    300.0 - (144.0 - dx * dx).sqrt()
+                }
             } else {
                 let dx: f64 = x - 30.0;
-                if dx.abs() > 8.0 { continue } else { 300.0 - (64.0 - dx * dx).sqrt() }
+                if dx.abs() > 8.0 {
+                    continue;
+                } else {
+                    300.0 - (64.0 - dx * dx).sqrt()
+                }
             };
-            let h = p.cast(&axis_ray(x, 0.0)).unwrap_or_else(|| panic!("miss at x = {x}"));
+            let h = p
+                .cast(&axis_ray(x, 0.0))
+                .unwrap_or_else(|| panic!("miss at x = {x}"));
             assert!((h.t - expect).abs() < 1e-9, "x = {x}: {} vs {expect}", h.t);
             assert!((h.normal.norm() - 1.0).abs() < 1e-12);
         }
         assert!(p.cast(&axis_ray(0.0, 10.5)).is_none());
         // Equal radii: a cylinder, flat at z = 290 between the spheres.
-        let cyl = PreparedElement::pill(&s(-30.0, 0.0, 300.0, 10.0), &s(30.0, 0.0, 300.0, 10.0)).unwrap();
+        let cyl =
+            PreparedElement::pill(&s(-30.0, 0.0, 300.0, 10.0), &s(30.0, 0.0, 300.0, 10.0)).unwrap();
         for x in [-29.0, -5.0, 0.0, 17.3, 29.9] {
             assert_eq!(cyl.cast(&axis_ray(x, 0.0)).unwrap().t, 290.0);
         }
@@ -362,20 +384,39 @@ mod tests {
 
     #[test]
     fn wedge_planar_face_has_exact_depth() {
-        let (a, b, c) = (s(-30.0, -20.0, 300.0, 10.0), s(30.0, -20.0, 300.0, 10.0), s(0.0, 30.0, 300.0, 10.0));
-        for w in [PreparedElement::wedge(&a, &b, &c).unwrap(), PreparedElement::wedge(&c, &b, &a).unwrap()] {
+        let (a, b, c) = (
+            s(-30.0, -20.0, 300.0, 10.0),
+            s(30.0, -20.0, 300.0, 10.0),
+            s(0.0, 30.0, 300.0, 10.0),
+        );
+        for w in [
+            PreparedElement::wedge(&a, &b, &c).unwrap(),
+            PreparedElement::wedge(&c, &b, &a).unwrap(),
+        ] {
             assert!(w.has_planar_faces());
-            for (x, y) in [(0.0, 0.0), (-25.0, -19.0), (25.0, -19.0), (0.0, 28.0), (10.0, 5.0)] {
+            for (x, y) in [
+                (0.0, 0.0),
+                (-25.0, -19.0),
+                (25.0, -19.0),
+                (0.0, 28.0),
+                (10.0, 5.0),
+            ] {
                 let h = w.cast(&axis_ray(x, y)).unwrap();
                 assert!((h.t - 290.0).abs() < 1e-9, "({x}, {y}): {}", h.t);
                 assert!((h.normal + V3::z()).norm() < 1e-9);
                 // Perspective rays from the camera center: depth z is exactly 290 too.
-                let h = w.cast(&Ray::new(V3::zeros(), V3::new(x, y, 290.0)).unwrap()).unwrap();
+                let h = w
+                    .cast(&Ray::new(V3::zeros(), V3::new(x, y, 290.0)).unwrap())
+                    .unwrap();
                 assert!((h.point.z - 290.0).abs() < 1e-9);
             }
         }
         // Unequal radii: the hit lies on the plane tangent to the three spheres.
-        let (a, b, c) = (s(-30.0, -20.0, 300.0, 10.0), s(30.0, -20.0, 300.0, 13.0), s(0.0, 30.0, 300.0, 7.0));
+        let (a, b, c) = (
+            s(-30.0, -20.0, 300.0, 10.0),
+            s(30.0, -20.0, 300.0, 13.0),
+            s(0.0, 30.0, 300.0, 7.0),
+        );
         let w = PreparedElement::wedge(&a, &b, &c).unwrap();
         let h = w.cast(&axis_ray(0.0, 0.0)).unwrap();
         let n = h.normal;
@@ -385,7 +426,11 @@ mod tests {
     }
 
     fn random_sphere(rng: &mut rand_chacha::ChaCha8Rng) -> Sphere {
-        let r = if rng.random_bool(0.1) { 0.0 } else { rng.random_range(0.5..15.0) };
+        let r = if rng.random_bool(0.1) {
+            0.0
+        } else {
+            rng.random_range(0.5..15.0)
+        };
         Sphere::new(point_in_cube(rng, &V3::zeros(), 25.0), r)
     }
 
@@ -393,29 +438,67 @@ mod tests {
     fn test_elements(rng: &mut rand_chacha::ChaCha8Rng) -> Vec<(Vec<Sphere>, Element)> {
         let mut out = vec![];
         for _ in 0..25 {
-            out.push((vec![random_sphere(rng), random_sphere(rng)], Element::Pill([0, 1])));
-            out.push((vec![random_sphere(rng), random_sphere(rng), random_sphere(rng)], Element::Wedge([0, 1, 2])));
+            out.push((
+                vec![random_sphere(rng), random_sphere(rng)],
+                Element::Pill([0, 1]),
+            ));
+            out.push((
+                vec![random_sphere(rng), random_sphere(rng), random_sphere(rng)],
+                Element::Wedge([0, 1, 2]),
+            ));
         }
         let degenerate = [
-            vec![s(-20.0, 0.0, 0.0, 8.0), s(20.0, 0.0, 0.0, 8.0)],  // equal radii
-            vec![s(3.0, 1.0, 2.0, 8.0), s(3.0, 1.0, 2.0, 12.0)],    // coincident centers
-            vec![s(0.0, 0.0, 0.0, 15.0), s(5.0, 3.0, 0.0, 6.0)],    // swallowed
-            vec![s(0.0, 0.0, 0.0, 15.0), s(10.0, 0.0, 0.0, 5.0)],   // internally tangent
-            vec![s(-20.0, 0.0, 0.0, 0.0), s(20.0, 0.0, 0.0, 9.0)],  // zero radius (true cone)
-            vec![s(-20.0, 0.0, 0.0, 0.0), s(20.0, 0.0, 0.0, 0.0)],  // zero radii (a segment)
+            vec![s(-20.0, 0.0, 0.0, 8.0), s(20.0, 0.0, 0.0, 8.0)], // equal radii
+            vec![s(3.0, 1.0, 2.0, 8.0), s(3.0, 1.0, 2.0, 12.0)],   // coincident centers
+            vec![s(0.0, 0.0, 0.0, 15.0), s(5.0, 3.0, 0.0, 6.0)],   // swallowed
+            vec![s(0.0, 0.0, 0.0, 15.0), s(10.0, 0.0, 0.0, 5.0)],  // internally tangent
+            vec![s(-20.0, 0.0, 0.0, 0.0), s(20.0, 0.0, 0.0, 9.0)], // zero radius (true cone)
+            vec![s(-20.0, 0.0, 0.0, 0.0), s(20.0, 0.0, 0.0, 0.0)], // zero radii (a segment)
         ];
         for d in degenerate {
             out.push((d, Element::Pill([0, 1])));
         }
         let wedges = [
-            vec![s(-20.0, 0.0, 0.0, 8.0), s(20.0, 0.0, 0.0, 8.0), s(0.0, 25.0, 0.0, 8.0)],
-            vec![s(-20.0, 0.0, 0.0, 8.0), s(0.0, 0.0, 0.0, 5.0), s(20.0, 0.0, 0.0, 10.0)], // collinear
-            vec![s(-20.0, 0.0, 0.0, 8.0), s(-20.0, 0.0, 0.0, 8.0), s(20.0, 5.0, 0.0, 6.0)], // coincident
-            vec![s(0.0, 0.0, 0.0, 20.0), s(5.0, 3.0, 1.0, 4.0), s(30.0, 0.0, 0.0, 6.0)], // swallowed
-            vec![s(0.0, 0.0, 0.0, 20.0), s(5.0, 3.0, 1.0, 4.0), s(-4.0, 2.0, 3.0, 6.0)], // two swallowed
-            vec![s(-20.0, 0.0, 0.0, 0.0), s(20.0, 0.0, 0.0, 0.0), s(0.0, 25.0, 0.0, 0.0)], // zero radii
-            vec![s(-20.0, 0.0, 0.0, 0.0), s(20.0, 0.0, 0.0, 3.0), s(0.0, 25.0, 0.0, 9.0)], // one zero
-            vec![s(-20.0, 0.0, 0.0, 30.0), s(20.0, 0.0, 0.0, 2.0), s(0.0, 25.0, 0.0, 2.0)], // no plane
+            vec![
+                s(-20.0, 0.0, 0.0, 8.0),
+                s(20.0, 0.0, 0.0, 8.0),
+                s(0.0, 25.0, 0.0, 8.0),
+            ],
+            vec![
+                s(-20.0, 0.0, 0.0, 8.0),
+                s(0.0, 0.0, 0.0, 5.0),
+                s(20.0, 0.0, 0.0, 10.0),
+            ], // collinear
+            vec![
+                s(-20.0, 0.0, 0.0, 8.0),
+                s(-20.0, 0.0, 0.0, 8.0),
+                s(20.0, 5.0, 0.0, 6.0),
+            ], // coincident
+            vec![
+                s(0.0, 0.0, 0.0, 20.0),
+                s(5.0, 3.0, 1.0, 4.0),
+                s(30.0, 0.0, 0.0, 6.0),
+            ], // swallowed
+            vec![
+                s(0.0, 0.0, 0.0, 20.0),
+                s(5.0, 3.0, 1.0, 4.0),
+                s(-4.0, 2.0, 3.0, 6.0),
+            ], // two swallowed
+            vec![
+                s(-20.0, 0.0, 0.0, 0.0),
+                s(20.0, 0.0, 0.0, 0.0),
+                s(0.0, 25.0, 0.0, 0.0),
+            ], // zero radii
+            vec![
+                s(-20.0, 0.0, 0.0, 0.0),
+                s(20.0, 0.0, 0.0, 3.0),
+                s(0.0, 25.0, 0.0, 9.0),
+            ], // one zero
+            vec![
+                s(-20.0, 0.0, 0.0, 30.0),
+                s(20.0, 0.0, 0.0, 2.0),
+                s(0.0, 25.0, 0.0, 2.0),
+            ], // no plane
         ];
         for w in wedges {
             out.push((w, Element::Wedge([0, 1, 2])));
@@ -433,7 +516,11 @@ mod tests {
             let samples = skeleton_samples(&spheres, &element, step);
             // Point-like samples (all radii 0: a flat triangle or a segment) leave gaps of the
             // order of the step itself.
-            let tol = if spheres.iter().all(|s| s.radius == 0.0) { step } else { tol };
+            let tol = if spheres.iter().all(|s| s.radius == 0.0) {
+                step
+            } else {
+                tol
+            };
             let target = prepared.bounds();
             for _ in 0..300 {
                 let origin = target.center + unit_vector(&mut rng) * (target.radius + 60.0);
@@ -442,7 +529,9 @@ mod tests {
                 let exact = prepared.cast(&ray);
                 let brute = brute_first_hit(&samples, &ray);
                 if let Some(tb) = brute {
-                    let h = exact.unwrap_or_else(|| panic!("{element:?} {spheres:?}: brute hit at {tb}, exact miss"));
+                    let h = exact.unwrap_or_else(|| {
+                        panic!("{element:?} {spheres:?}: brute hit at {tb}, exact miss")
+                    });
                     // No sample of the surface lies in front of the exact hit.
                     assert!(h.t <= tb + 1e-9, "exact {} behind brute {tb}", h.t);
                     if -h.normal.dot(&ray.dir) > 0.3 {
@@ -452,7 +541,10 @@ mod tests {
                 if let Some(h) = exact {
                     hits += 1;
                     let d = brute_sdf(&samples, &h.point);
-                    assert!((-1e-9..tol).contains(&d), "{element:?} {spheres:?}: sdf {d} at the hit");
+                    assert!(
+                        (-1e-9..tol).contains(&d),
+                        "{element:?} {spheres:?}: sdf {d} at the hit"
+                    );
                     assert!((h.normal.norm() - 1.0).abs() < 1e-9 && h.normal.dot(&ray.dir) <= 0.0);
                     assert!((h.point - ray.at(h.t)).norm() < 1e-9);
                 }
@@ -484,13 +576,28 @@ mod tests {
                 let ray = Ray::new(origin, unit_vector(&mut rng)).unwrap();
                 if let Some(h) = p.cast(&ray) {
                     assert!(h.t.is_finite() && h.point.iter().all(|x| x.is_finite()));
-                    assert!((h.normal.norm() - 1.0).abs() < 1e-9, "{element:?} {spheres:?}");
+                    assert!(
+                        (h.normal.norm() - 1.0).abs() < 1e-9,
+                        "{element:?} {spheres:?}"
+                    );
                 }
                 assert!(p.phi(&origin).is_finite());
             }
             // Rays aimed exactly at centers and along the axis of the first pair.
-            let axis = Ray::new(spheres[0].center - (spheres[1].center - spheres[0].center) * 3.0, spheres[1].center - spheres[0].center);
-            for ray in [axis, Ray::new(V3::new(0.0, 0.0, -100.0), spheres[0].center - V3::new(0.0, 0.0, -100.0))].into_iter().flatten() {
+            let axis = Ray::new(
+                spheres[0].center - (spheres[1].center - spheres[0].center) * 3.0,
+                spheres[1].center - spheres[0].center,
+            );
+            for ray in [
+                axis,
+                Ray::new(
+                    V3::new(0.0, 0.0, -100.0),
+                    spheres[0].center - V3::new(0.0, 0.0, -100.0),
+                ),
+            ]
+            .into_iter()
+            .flatten()
+            {
                 if let Some(h) = p.cast(&ray) {
                     assert!(h.t.is_finite() && (h.normal.norm() - 1.0).abs() < 1e-9);
                 }
@@ -507,10 +614,19 @@ mod tests {
         assert!(Ray::new(V3::new(f64::NAN, 0.0, 0.0), V3::z()).is_none());
         assert!(Ray::new(V3::zeros(), V3::zeros()).is_none());
         assert!(Ray::segment(V3::zeros(), V3::z(), 5.0, 1.0).is_none());
-        let bad = Ray { origin: V3::zeros(), dir: V3::new(0.0, 0.0, 2.0), t_min: 0.0, t_max: 1e9 };
+        let bad = Ray {
+            origin: V3::zeros(),
+            dir: V3::new(0.0, 0.0, 2.0),
+            t_min: 0.0,
+            t_max: 1e9,
+        };
         assert!(cast_ray_pill(&bad, &a, &a).is_none());
         let spheres = [a, nan];
-        let elements = [Element::Pill([0, 1]), Element::Pill([0, 7]), Element::Pill([0, 0])];
+        let elements = [
+            Element::Pill([0, 1]),
+            Element::Pill([0, 7]),
+            Element::Pill([0, 0]),
+        ];
         let ray = Ray::new(V3::zeros(), V3::z()).unwrap();
         // The invalid elements are skipped; the valid one is found.
         assert_eq!(cast_ray(&ray, &spheres, &elements).unwrap().element, 2);

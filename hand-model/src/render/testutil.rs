@@ -14,7 +14,10 @@ type V3 = Vector3<f64>;
 /// Balls on the skeleton of `element`, spaced by at most `step` mm along every edge.
 pub(crate) fn skeleton_samples(spheres: &[Sphere], element: &Element, step: f64) -> Vec<Sphere> {
     let lerp = |a: &Sphere, b: &Sphere, t: f64| {
-        Sphere::new(a.center * (1.0 - t) + b.center * t, a.radius * (1.0 - t) + b.radius * t)
+        Sphere::new(
+            a.center * (1.0 - t) + b.center * t,
+            a.radius * (1.0 - t) + b.radius * t,
+        )
     };
     let mut out = Vec::new();
     match *element {
@@ -26,7 +29,11 @@ pub(crate) fn skeleton_samples(spheres: &[Sphere], element: &Element, step: f64)
             }
         }
         Element::Wedge([a, b, c]) => {
-            let (a, b, c) = (&spheres[a as usize], &spheres[b as usize], &spheres[c as usize]);
+            let (a, b, c) = (
+                &spheres[a as usize],
+                &spheres[b as usize],
+                &spheres[c as usize],
+            );
             let longest = (a.center - b.center)
                 .norm()
                 .max((b.center - c.center).norm())
@@ -80,11 +87,12 @@ pub(crate) fn rng(seed: u64) -> ChaCha8Rng {
 
 /// A uniform point in the cube `[-half, half]³` around `center`.
 pub(crate) fn point_in_cube(rng: &mut ChaCha8Rng, center: &V3, half: f64) -> V3 {
-    center + V3::new(
-        rng.random_range(-half..half),
-        rng.random_range(-half..half),
-        rng.random_range(-half..half),
-    )
+    center
+        + V3::new(
+            rng.random_range(-half..half),
+            rng.random_range(-half..half),
+            rng.random_range(-half..half),
+        )
 }
 
 /// A uniform unit vector.
