@@ -4,8 +4,9 @@
 //!
 //! The screen is cut into [`TILE`]×[`TILE`] tiles. Each element's bounding sphere is projected
 //! to its exact screen rectangle; the element is listed in every tile that rectangle touches, and
-//! the pixels of a tile cast their rays against that tile's list only (with bounding-sphere
-//! culling per ray). The result is bit-identical to casting every pixel's ray against all
+//! the pixels of a tile cast their rays against that tile's list only, sorted front to back, with
+//! bounding-sphere culling per ray (an element whose bounding sphere starts behind the current
+//! hit is skipped). The result is bit-identical to casting every pixel's ray against all
 //! elements with [`cast_ray`](super::cast_ray).
 
 use nalgebra::Vector3;
@@ -15,16 +16,18 @@ use super::raycast::{cast_prepared, Ray};
 use crate::error::{ModelError, Result};
 use crate::shape::{Element, Sphere};
 
-/// Tile side in pixels.
+/// Tile side in pixels of the tiled renderer (the CPU stand-in for §3.3.2's fullscreen quad).
 pub const TILE: usize = 16;
 
-/// Largest accepted image side (pixels), so that a bad size cannot request gigabytes.
+/// Largest accepted image side (pixels, §3.3.2 renders 320×240), so that a bad size cannot
+/// request gigabytes.
 pub const MAX_IMAGE_SIDE: u32 = 16384;
 
-/// Element id of a background pixel in [`DepthRender::element`].
+/// Element id of a background pixel in [`DepthRender::element`] (no intersection, §3.3.2).
 pub const NO_ELEMENT: u32 = u32::MAX;
 
-/// Pinhole intrinsics of a camera without distortion (DESIGN.md camera frame: x right, y down,
+/// Pinhole intrinsics of a camera without distortion, used to form each pixel's ray (§3.3.2:
+/// "use the camera intrinsics to compute the camera ray"; DESIGN.md camera frame: x right, y down,
 /// z forward; pixel `(u, v)` = column, row, with integer coordinates at pixel centers).
 ///
 /// Deliberately minimal: the renderer's own camera until `sensor-io` owns the camera types.
@@ -45,7 +48,7 @@ pub struct Intrinsics {
 }
 
 impl Intrinsics {
-    /// Check that focal lengths are finite and positive, the principal point finite and the size
+    /// Check (§3.3.2 intrinsics) that focal lengths are finite and positive, the principal point finite and the size
     /// in `1..=MAX_IMAGE_SIDE`.
     pub fn validate(&self) -> Result<()> {
         let bad = |reason: String| {
@@ -73,7 +76,7 @@ impl Intrinsics {
         Ok(())
     }
 
-    /// The camera ray through the center of pixel `(u, v)`: origin at the camera center, unit
+    /// The camera ray `r(x)` of §3.3.2 through the center of pixel `(u, v)`: origin at the camera center, unit
     /// direction `normalize((u − cx)/fx, (v − cy)/fy, 1)`, `t ∈ [0, ∞)`.
     #[inline]
     pub fn pixel_ray(&self, u: f64, v: f64) -> Ray {
@@ -86,14 +89,15 @@ impl Intrinsics {
         }
     }
 
-    /// Pixel coordinates `(u, v)` of a camera-frame point with `z > 0`.
+    /// Pixel coordinates `(u, v)` of a camera-frame point with `z > 0` (pinhole model, §3.3.2).
     #[inline]
     pub fn project(&self, p: &Vector3<f64>) -> [f64; 2] {
         [self.fx * p.x / p.z + self.cx, self.fy * p.y / p.z + self.cy]
     }
 }
 
-/// A rendered frame: per pixel (row-major, `v·width + u`) the depth, the element and the normal.
+/// A rendered frame (§3.3.2): per pixel (row-major, `v·width + u`) the depth, the element and
+/// the normal.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct DepthRender {
     /// Image width.
@@ -121,12 +125,12 @@ impl DepthRender {
         self.normal.resize(n, [0.0; 3]);
     }
 
-    /// Number of pixels that hit the model.
+    /// Number of pixels that hit the model (the rendered silhouette of §3.3.2).
     pub fn hit_count(&self) -> usize {
         self.element.iter().filter(|&&e| e != NO_ELEMENT).count()
     }
 
-    /// The depth as a DESIGN.md depth image: `u16` millimetres (rounded, saturated), 0 = none.
+    /// The depth as a DESIGN.md depth image (the synthetic sensor frame of §3.3.2): `u16` millimetres (rounded, saturated), 0 = none.
     pub fn depth_u16(&self) -> Vec<u16> {
         self.depth
             .iter()
@@ -135,7 +139,7 @@ impl DepthRender {
     }
 }
 
-/// The tiled renderer; owns its scratch (prepared elements, per-tile element lists) so that
+/// The tiled ray-casting renderer of §3.3.2 on the CPU; owns its scratch (prepared elements, per-tile element lists) so that
 /// rendering a sequence allocates only on the first frame.
 #[derive(Clone, Debug, Default)]
 pub struct DepthRenderer {
@@ -144,6 +148,7 @@ pub struct DepthRenderer {
     tile_items: Vec<u32>,
     rects: Vec<[u32; 4]>,
     fill: Vec<u32>,
+    near: Vec<f64>,
 }
 
 /// Exact pixel range `[lo, hi]` of `x/z` for a sphere entirely in front of the camera, along one
@@ -159,12 +164,13 @@ fn projected_range(coord: f64, z: f64, radius: f64, focal: f64, principal: f64) 
 }
 
 impl DepthRenderer {
-    /// A renderer with empty scratch.
+    /// A renderer with empty scratch (§3.3.2 renderer).
     pub fn new() -> Self {
         Self::default()
     }
 
-    /// Render `elements` (indices into `spheres`, all in the camera frame) into `out`.
+    /// Render `elements` (indices into `spheres`, all in the camera frame) into `out`: one ray
+    /// per pixel, closest intersection kept (§3.3.2).
     ///
     /// Errors: invalid intrinsics, an element index out of range, or a sphere used by an element
     /// that is non-finite or has a negative radius. The camera must be outside the model: rays
@@ -222,8 +228,7 @@ impl DepthRenderer {
         Ok(())
     }
 
-    /// Fill the per-tile element lists (CSR: `tile_start`, `tile_items`), elements in increasing
-    /// order within each tile.
+    /// Fill the per-tile element lists (CSR: `tile_start`, `tile_items`), sorted front to back.
     fn bin(&mut self, intr: &Intrinsics, tw: usize, th: usize) {
         let (w, h) = (intr.width as f64, intr.height as f64);
         self.rects.clear();
@@ -291,10 +296,27 @@ impl DepthRenderer {
                 }
             }
         }
+        // Front-to-back within each tile (by the nearest point of the bounding sphere), so that
+        // most rays cull the elements behind their first hit.
+        self.near.clear();
+        self.near.extend(
+            self.prepared
+                .iter()
+                .map(|p| p.bounds().center.norm() - p.bounds().radius),
+        );
+        for t in 0..tw * th {
+            let items =
+                &mut self.tile_items[self.tile_start[t] as usize..self.tile_start[t + 1] as usize];
+            items.sort_unstable_by(|&a, &b| {
+                self.near[a as usize]
+                    .total_cmp(&self.near[b as usize])
+                    .then(a.cmp(&b))
+            });
+        }
     }
 }
 
-/// Render a depth image with a fresh [`DepthRenderer`] (see [`DepthRenderer::render`]).
+/// Render a depth image (§3.3.2) with a fresh [`DepthRenderer`] (see [`DepthRenderer::render`]).
 pub fn render_depth(
     intrinsics: &Intrinsics,
     spheres: &[Sphere],

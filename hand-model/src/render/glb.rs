@@ -18,11 +18,11 @@ use super::atomic::write_atomic;
 use super::mesh::TriMesh;
 use crate::error::{ModelError, Result};
 
-/// Magic number `glTF`.
+/// Magic number `glTF` of the `.glb` header (export of the Fig. 3.4 surface).
 pub const GLB_MAGIC: u32 = 0x4654_6C67;
-/// Chunk type `JSON`.
+/// Chunk type `JSON` (export of the Fig. 3.4 surface).
 pub const CHUNK_JSON: u32 = 0x4E4F_534A;
-/// Chunk type `BIN\0`.
+/// Chunk type `BIN\0` (export of the Fig. 3.4 surface).
 pub const CHUNK_BIN: u32 = 0x004E_4942;
 
 const ARRAY_BUFFER: u32 = 34962;
@@ -37,7 +37,7 @@ fn push_f32s(bin: &mut Vec<u8>, values: impl Iterator<Item = f32>) {
     }
 }
 
-/// The `.glb` bytes of a mesh (positions converted from mm to m).
+/// The `.glb` bytes of a sphere-mesh surface mesh (Fig. 3.4) (positions converted from mm to m).
 ///
 /// Errors: a triangle index out of range or a non-finite position. An empty mesh gives a valid
 /// file with an empty scene and no buffer.
@@ -145,7 +145,7 @@ fn assemble(json: &str, bin: &[u8]) -> Vec<u8> {
     out
 }
 
-/// Write a mesh as `.glb`, atomically (temporary file in the same folder, then rename).
+/// Write a sphere-mesh surface mesh (Fig. 3.4) as `.glb`, atomically (temporary file in the same folder, then rename).
 pub fn write_glb(path: &Path, mesh: &TriMesh) -> Result<()> {
     write_atomic(path, &encode_glb(mesh)?)
 }

@@ -8,7 +8,7 @@ use super::atomic::write_atomic;
 use super::mesh::TriMesh;
 use crate::error::Result;
 
-/// The OBJ text of a mesh (coordinates as given, i.e. millimetres; 1-based indices). Normals
+/// The OBJ text of a sphere-mesh surface mesh (Fig. 3.4) (coordinates as given, i.e. millimetres; 1-based indices). Normals
 /// are written when there is one per vertex.
 pub fn encode_obj(mesh: &TriMesh) -> String {
     let mut s = String::with_capacity(64 * mesh.positions.len() + 32 * mesh.triangles.len() + 128);
@@ -39,7 +39,7 @@ pub fn encode_obj(mesh: &TriMesh) -> String {
     s
 }
 
-/// Write a mesh as OBJ, atomically (temporary file in the same folder, then rename).
+/// Write a sphere-mesh surface mesh (Fig. 3.4) as OBJ, atomically (temporary file in the same folder, then rename).
 pub fn write_obj(path: &Path, mesh: &TriMesh) -> Result<()> {
     write_atomic(path, encode_obj(mesh).as_bytes())
 }

@@ -139,6 +139,108 @@ pub struct PreparedElement {
     /// `r₁`, `r₂ − r₁`, `r₃ − r₁` for the radius at a barycentric point.
     pub(crate) radius_plane: [f64; 3],
     pub(crate) bounds: Sphere,
+    /// A bounding polytope `{x : nᵢ·x ≤ hᵢ}` tighter than the sphere (an oriented box around a
+    /// pill, a triangular prism around a wedge), for culling rays; `count = 0` when degenerate.
+    pub(crate) hull: Halfspaces,
+}
+
+/// Up to six half-spaces `n·x ≤ h` whose intersection contains an element.
+#[derive(Copy, Clone, Debug, PartialEq)]
+pub(crate) struct Halfspaces {
+    pub(crate) planes: [(V3, f64); 6],
+    pub(crate) count: usize,
+}
+
+impl Halfspaces {
+    fn new(planes: &[(V3, f64)]) -> Self {
+        let mut out = Self {
+            planes: [(V3::zeros(), 0.0); 6],
+            count: planes.len().min(6),
+        };
+        out.planes[..out.count].copy_from_slice(&planes[..out.count]);
+        out
+    }
+
+    /// Whether the segment `o + t·d`, `t ∈ [t0, t1]`, meets the polytope.
+    #[inline]
+    pub(crate) fn meets(&self, o: &V3, d: &V3, mut t0: f64, mut t1: f64) -> bool {
+        for (n, h) in &self.planes[..self.count] {
+            let nd = n.dot(d);
+            let gap = h - n.dot(o);
+            if nd > 0.0 {
+                t1 = t1.min(gap / nd);
+            } else if nd < 0.0 {
+                t0 = t0.max(gap / nd);
+            } else if gap < 0.0 {
+                return false;
+            }
+            if t0 > t1 {
+                return false;
+            }
+        }
+        true
+    }
+}
+
+/// Margin added to the culling planes: relative to the element's size, plus a floor.
+fn margin(spheres: &[Sphere]) -> (f64, f64) {
+    let r_max = spheres.iter().map(|s| s.radius).fold(0.0, f64::max);
+    let scale = spheres
+        .iter()
+        .map(|s| s.center.amax() + s.radius)
+        .fold(1.0, f64::max);
+    (r_max, 1e-9 * scale)
+}
+
+/// The oriented box around a pill: along the axis from `a` to `b`, `r_max` beyond each center.
+fn pill_hull(a: &Sphere, b: &Sphere) -> Halfspaces {
+    let (r, eps) = margin(&[*a, *b]);
+    let e = b.center - a.center;
+    let axis = if e.norm() > 0.0 {
+        e.normalize()
+    } else {
+        V3::x()
+    };
+    let u = any_perpendicular(&axis);
+    let v = axis.cross(&u);
+    let (la, lb) = (axis.dot(&a.center), axis.dot(&b.center));
+    Halfspaces::new(&[
+        (axis, la.max(lb) + r + eps),
+        (-axis, -la.min(lb) + r + eps),
+        (u, u.dot(&a.center) + r + eps),
+        (-u, -u.dot(&a.center) + r + eps),
+        (v, v.dot(&a.center) + r + eps),
+        (-v, -v.dot(&a.center) + r + eps),
+    ])
+}
+
+/// The triangular prism around a wedge: the plane of centers ± `r_max`, and each edge's in-plane
+/// outward normal pushed out by `r_max`. Empty (no culling) for degenerate triangles.
+fn wedge_hull(a: &Sphere, b: &Sphere, c: &Sphere) -> Halfspaces {
+    let (r, eps) = margin(&[*a, *b, *c]);
+    let m = (b.center - a.center).cross(&(c.center - a.center));
+    let scale = (b.center - a.center)
+        .norm_squared()
+        .max((c.center - a.center).norm_squared());
+    if m.norm_squared() <= 1e-12 * scale * scale || scale == 0.0 {
+        return Halfspaces::new(&[]);
+    }
+    let m = m.normalize();
+    let mut planes = [
+        (m, m.dot(&a.center) + r + eps),
+        (-m, -m.dot(&a.center) + r + eps),
+        (m, 0.0),
+        (m, 0.0),
+        (m, 0.0),
+    ];
+    for (k, (p, q, other)) in [(a, b, c), (b, c, a), (c, a, b)].into_iter().enumerate() {
+        let mut n = (q.center - p.center).cross(&m).normalize();
+        if n.dot(&(other.center - p.center)) > 0.0 {
+            n = -n;
+        }
+        planes[2 + k] = (n, n.dot(&p.center) + r + eps);
+    }
+    Halfspaces::new(&planes)
 }
 
 fn sphere_ok(s: &Sphere) -> bool {
@@ -146,7 +248,7 @@ fn sphere_ok(s: &Sphere) -> bool {
 }
 
 impl PreparedElement {
-    /// Prepare element `element` whose sphere indices refer to `spheres` (e.g. the posed spheres
+    /// Prepare element `element` (Fig. 3.3 decomposition) whose sphere indices refer to `spheres` (e.g. the posed spheres
     /// of a [`PosedSphereMesh`](crate::spheremesh::PosedSphereMesh)).
     ///
     /// `None` when an index is out of range, or a sphere is non-finite or has a negative radius.
@@ -161,7 +263,7 @@ impl PreparedElement {
         }
     }
 
-    /// A pill: the convex hull of two spheres (`None` for non-finite input or negative radii).
+    /// A pill: the convex hull of two spheres (Eq. 3.1, Fig. 3.3; `None` for non-finite input or negative radii).
     pub fn pill(a: &Sphere, b: &Sphere) -> Option<Self> {
         if !(sphere_ok(a) && sphere_ok(b)) {
             return None;
@@ -174,10 +276,11 @@ impl PreparedElement {
             faces: None,
             radius_plane: [a.radius, b.radius - a.radius, 0.0],
             bounds: bounding_sphere(&spheres[..2]),
+            hull: pill_hull(a, b),
         })
     }
 
-    /// A wedge: the convex hull of three spheres (`None` for non-finite input or negative radii).
+    /// A wedge: the convex hull of three spheres (Eq. 3.1, Fig. 3.3; `None` for non-finite input or negative radii).
     pub fn wedge(a: &Sphere, b: &Sphere, c: &Sphere) -> Option<Self> {
         if !(sphere_ok(a) && sphere_ok(b) && sphere_ok(c)) {
             return None;
@@ -190,20 +293,22 @@ impl PreparedElement {
             faces: tangent_faces(a, b, c),
             radius_plane: [a.radius, b.radius - a.radius, c.radius - a.radius],
             bounds: bounding_sphere(&spheres),
+            hull: wedge_hull(a, b, c),
         })
     }
 
-    /// The spheres of the element (2 for a pill, 3 for a wedge).
+    /// The spheres of the element (2 for a pill, 3 for a wedge; Fig. 3.3).
     pub fn spheres(&self) -> &[Sphere] {
         &self.spheres[..self.count]
     }
 
-    /// A sphere enclosing the element (used for culling rays and screen tiles).
+    /// A sphere enclosing the element (used for culling rays and screen tiles, §3.3.2).
     pub fn bounds(&self) -> Sphere {
         self.bounds
     }
 
-    /// The axis-aligned box `[min, max]` of the element (the box of its spheres' boxes).
+    /// The axis-aligned box `[min, max]` of the element (the box of its spheres' boxes), used by
+    /// the mesher (§3.3.2 / Fig. 3.4).
     pub fn aabb(&self) -> [Vector3<f64>; 2] {
         let mut lo = V3::repeat(f64::INFINITY);
         let mut hi = V3::repeat(f64::NEG_INFINITY);
@@ -214,7 +319,7 @@ impl PreparedElement {
         [lo, hi]
     }
 
-    /// Whether the element has planar parts (a wedge whose tangent planes exist).
+    /// Whether the element has planar parts (a wedge whose tangent planes exist, Fig. 3.3).
     pub fn has_planar_faces(&self) -> bool {
         self.faces.is_some()
     }
@@ -245,7 +350,13 @@ impl PreparedElement {
         best
     }
 
-    /// Whether `p` lies strictly inside the element (`φ_e(p) < 0`).
+    /// Bounding sphere of the element with these spheres (what [`PreparedElement::bounds`] gives),
+    /// without preparing it.
+    pub(crate) fn bounds_of(spheres: &[Sphere]) -> Sphere {
+        bounding_sphere(spheres)
+    }
+
+    /// Whether `p` lies strictly inside the element (`φ_e(p) < 0`, Eq. 3.6).
     pub fn contains(&self, p: &Vector3<f64>) -> bool {
         let b = &self.bounds;
         if (p - b.center).norm_squared() > b.radius * b.radius {
@@ -304,4 +415,48 @@ fn tangent_faces(a: &Sphere, b: &Sphere, c: &Sphere) -> Option<[Face; 2]> {
         });
     }
     Some([faces[0]?, faces[1]?])
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::render::testutil::{point_in_cube, rng, skeleton_samples};
+    use rand::Rng;
+
+    #[test]
+    fn culling_volumes_contain_the_element() {
+        let mut rng = rng(11);
+        for k in 0..200 {
+            let mut spheres = [Sphere::new(V3::zeros(), 0.0); 3];
+            for s in &mut spheres {
+                *s = Sphere::new(
+                    point_in_cube(&mut rng, &V3::new(0.0, 0.0, 300.0), 40.0),
+                    rng.random_range(0.0..20.0),
+                );
+            }
+            if k % 10 == 0 {
+                spheres[2].center = (spheres[0].center + spheres[1].center) * 0.5;
+                // collinear
+            }
+            let element = if k % 2 == 0 {
+                Element::Pill([0, 1])
+            } else {
+                Element::Wedge([0, 1, 2])
+            };
+            let p = PreparedElement::new(&spheres, &element).unwrap();
+            let b = p.bounds();
+            let [lo, hi] = p.aabb();
+            for s in skeleton_samples(&spheres, &element, 1.0) {
+                assert!((s.center - b.center).norm() + s.radius <= b.radius);
+                for (n, h) in &p.hull.planes[..p.hull.count] {
+                    assert!(
+                        n.dot(&s.center) + s.radius <= *h + 1e-9,
+                        "{element:?} {spheres:?}"
+                    );
+                }
+                assert!((s.center - V3::repeat(s.radius) - lo).min() >= -1e-9);
+                assert!((hi - s.center - V3::repeat(s.radius)).min() >= -1e-9);
+            }
+        }
+    }
 }

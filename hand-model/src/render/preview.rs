@@ -16,7 +16,7 @@ use crate::math::Rigid3;
 use crate::shape::{Element, Sphere};
 use crate::spheremesh::{PosedSphereMesh, SphereMeshTemplate};
 
-/// The side of the model frame the preview camera looks from.
+/// The side of the model frame the preview camera looks from (visual verification, §3.3.2).
 #[derive(Copy, Clone, Debug, PartialEq, Eq, Default)]
 pub enum ViewSide {
     /// From −z toward +z: the palm faces the camera (DESIGN.md model frame), fingers up; a right
@@ -27,7 +27,7 @@ pub enum ViewSide {
     Back,
 }
 
-/// Options of [`render_preview`].
+/// Options of [`render_preview`] (§3.3.2 visual verification).
 #[derive(Copy, Clone, Debug, PartialEq)]
 pub struct PreviewOptions {
     /// Image width (pixels).
@@ -51,7 +51,7 @@ impl Default for PreviewOptions {
     }
 }
 
-/// A camera that frames a model: intrinsics and the model → camera transform.
+/// A camera that frames a model (§3.3.2 rendering): intrinsics and the model → camera transform.
 #[derive(Copy, Clone, Debug, PartialEq)]
 pub struct Framing {
     /// Pinhole intrinsics (`fx = fy = width`, principal point at the image center).
@@ -60,7 +60,7 @@ pub struct Framing {
     pub camera_from_model: Rigid3,
 }
 
-/// Place a camera that looks at `spheres` (model frame) from `side`, with fingers (+y) up, so
+/// Place a camera (§3.3.2 rendering) that looks at `spheres` (model frame) from `side`, with fingers (+y) up, so
 /// that the box of the spheres fills about 90 % of the tighter image side.
 ///
 /// Errors: no sphere, a non-finite sphere, or invalid image size.
@@ -109,7 +109,7 @@ pub fn frame_model(spheres: &[Sphere], width: u32, height: u32, side: ViewSide) 
     })
 }
 
-/// The display color of a bone from its name: thumb red, index orange, middle yellow, ring green,
+/// The display color of a bone (kinematic chain of Fig. 3.8a) from its name: thumb red, index orange, middle yellow, ring green,
 /// pinky blue, palm skin, wrist grey; phalanx `_1`/`_2`/`_3` get darker to lighter; other names
 /// get a hue hashed from the name.
 pub fn bone_color(name: &str) -> [u8; 3] {
@@ -150,7 +150,7 @@ pub fn bone_color(name: &str) -> [u8; 3] {
     base.map(|c| (c * k).clamp(0.0, 255.0) as u8)
 }
 
-/// Shade a render: Lambert with a head light, `0.2 + 0.8·max(0, −n·d)` times the element's
+/// Shade a §3.3.2 render: Lambert with a head light, `0.2 + 0.8·max(0, −n·d)` times the element's
 /// color (`colors[element]`, grey when missing), `background` elsewhere.
 pub fn shade(
     render: &DepthRender,
@@ -178,7 +178,7 @@ pub fn shade(
     img
 }
 
-/// A preview: the shaded image, the depth render it came from and the camera used.
+/// A preview (§3.3.2 visual verification, like Fig. 3.2): the shaded image, the depth render it came from and the camera used.
 #[derive(Clone, Debug)]
 pub struct Preview {
     /// The shaded RGB image.
@@ -189,7 +189,7 @@ pub struct Preview {
     pub framing: Framing,
 }
 
-/// Pose `template` at `pose`, frame it from `options.side` and shade it (colors per bone).
+/// Pose `template` at `pose` (Eq. 3.7), frame it from `options.side` and shade it (colors per bone).
 ///
 /// The framing uses the posed spheres as if the pose's global transform were the model frame, so
 /// any global rotation changes the view; use zero global DOFs for the canonical views.
@@ -234,7 +234,7 @@ pub fn render_preview(
     })
 }
 
-/// PNG bytes of an RGB image.
+/// PNG bytes of an RGB image (a §3.3.2 preview).
 pub fn encode_png(image: &RgbImage) -> Result<Vec<u8>> {
     let mut bytes = Vec::new();
     image::codecs::png::PngEncoder::new(&mut bytes)
@@ -251,12 +251,12 @@ pub fn encode_png(image: &RgbImage) -> Result<Vec<u8>> {
     Ok(bytes)
 }
 
-/// Write an RGB image as PNG, atomically (temporary file in the same folder, then rename).
+/// Write an RGB image (a §3.3.2 preview) as PNG, atomically (temporary file in the same folder, then rename).
 pub fn write_png(path: &Path, image: &RgbImage) -> Result<()> {
     write_atomic(path, &encode_png(image)?)
 }
 
-/// [`render_preview`] then [`write_png`].
+/// [`render_preview`] then [`write_png`]: a §3.3.2 preview on disk.
 pub fn write_preview_png(
     path: &Path,
     template: &SphereMeshTemplate,

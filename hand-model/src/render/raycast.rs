@@ -17,7 +17,8 @@ use crate::shape::{Element, Sphere};
 
 type V3 = Vector3<f64>;
 
-/// A ray `x(t) = origin + t·dir` restricted to `t ∈ [t_min, t_max]` (mm).
+/// A ray `x(t) = origin + t·dir` restricted to `t ∈ [t_min, t_max]` (mm): the camera ray `r(x)`
+/// of a pixel in thesis §3.3.2.
 #[derive(Copy, Clone, Debug, PartialEq)]
 pub struct Ray {
     /// Origin (mm).
@@ -73,7 +74,7 @@ impl Ray {
     }
 }
 
-/// Where a ray enters one element.
+/// Where a ray enters one element (the closest intersection of §3.3.2 for that element).
 #[derive(Copy, Clone, Debug, PartialEq)]
 pub struct SurfaceHit {
     /// Ray parameter of the hit (mm along the unit direction).
@@ -84,7 +85,8 @@ pub struct SurfaceHit {
     pub normal: Vector3<f64>,
 }
 
-/// The first hit of a ray with a whole model: a [`SurfaceHit`] plus the element it belongs to.
+/// The first hit of a ray with a whole model (§3.3.2: closest intersection over all elements):
+/// a [`SurfaceHit`] plus the element it belongs to.
 #[derive(Copy, Clone, Debug, PartialEq)]
 pub struct RayHit {
     /// Ray parameter of the hit.
@@ -137,21 +139,47 @@ fn ball_entry(s: &Sphere, o: &V3, d: &V3) -> Option<(f64, V3)> {
     Some((t, n))
 }
 
+/// Whether the ray's segment `[t_min, t_best]` meets a (bounding) ball.
+#[inline]
+fn sphere_meets(b: &Sphere, ray: &Ray, t_best: f64) -> bool {
+    let w = ray.origin - b.center;
+    let bb = w.dot(&ray.dir);
+    let disc = b.radius * b.radius - (w - ray.dir * bb).norm_squared();
+    if disc.is_nan() || disc < 0.0 {
+        return false;
+    }
+    let sq = disc.sqrt();
+    -bb + sq >= ray.t_min && -bb - sq <= t_best
+}
+
 impl PreparedElement {
     /// Entry `(t, outward normal)` of the whole line `o + t·d` (unit `d`) into the element, for
     /// any `t` (negative included); `None` when the line misses it.
+    ///
+    /// A convex body has a single entry point, and any entering crossing of a primitive that lies
+    /// on the element's boundary is it: the tangent triangles of a wedge and the cone band of a
+    /// pill are boundary (each lies on a supporting plane), so a hit on them ends the search.
+    /// Otherwise the entry is the smallest entering crossing over all primitives.
     pub(crate) fn line_entry(&self, o: &V3, d: &V3) -> Option<(f64, V3)> {
-        let mut best: Option<(f64, V3)> = None;
-        let mut keep = |t: f64, n: V3| {
-            if best.is_none_or(|(bt, _)| t < bt) {
-                best = Some((t, n));
-            }
-        };
-        for s in self.spheres() {
-            if let Some((t, n)) = ball_entry(s, o, d) {
-                keep(t, n);
+        if let Some(faces) = &self.faces {
+            let c1 = self.spheres[0].center;
+            for f in faces {
+                let denom = f.normal.dot(d);
+                if denom.is_nan() || denom >= -1e-12 {
+                    continue;
+                }
+                let t = (f.offset - f.normal.dot(o)) / denom;
+                if in_triangle(&f.skew(&c1, &(o + d * t))) {
+                    return Some((t, f.normal));
+                }
             }
         }
+        let mut best: Option<(f64, V3)> = None;
+        let keep = |best: &mut Option<(f64, V3)>, t: f64, n: V3| {
+            if best.is_none_or(|(bt, _)| t < bt) {
+                *best = Some((t, n));
+            }
+        };
         for cone in self.cones.iter().flatten() {
             let w = o - cone.apex_side;
             let s0 = w.dot(&cone.axis);
@@ -167,31 +195,24 @@ impl PreparedElement {
                 if !(s >= cone.s_lo && s <= cone.s_hi) {
                     continue;
                 }
-                let x = o + d * t;
-                let n = cone.normal_at(&x);
+                let n = cone.normal_at(&(o + d * t));
                 if n.dot(d) < 0.0 {
-                    keep(t, n);
+                    keep(&mut best, t, n);
                 }
             }
         }
-        if let Some(faces) = &self.faces {
-            let c1 = self.spheres[0].center;
-            for f in faces {
-                let denom = f.normal.dot(d);
-                if denom.is_nan() || denom >= -1e-12 {
-                    continue;
-                }
-                let t = (f.offset - f.normal.dot(o)) / denom;
-                let x = o + d * t;
-                if in_triangle(&f.skew(&c1, &x)) {
-                    keep(t, f.normal);
-                }
+        if self.count == 2 && best.is_some() {
+            return best;
+        }
+        for s in self.spheres() {
+            if let Some((t, n)) = ball_entry(s, o, d) {
+                keep(&mut best, t, n);
             }
         }
         best
     }
 
-    /// The first hit of `ray` with the element, or `None` (also for an invalid ray, and when the
+    /// The first hit of `ray` with the element (§3.3.2), or `None` (also for an invalid ray, and when the
     /// ray's segment starts inside the element).
     pub fn cast(&self, ray: &Ray) -> Option<SurfaceHit> {
         if !ray.is_valid() {
@@ -201,18 +222,13 @@ impl PreparedElement {
     }
 
     /// [`PreparedElement::cast`] for a valid ray, with `t_max` lowered to `t_best`; bounding-sphere
-    /// culling first.
+    /// culling first (bounding sphere, then the bounding box or prism).
     #[inline]
     pub(crate) fn cast_unchecked(&self, ray: &Ray, t_best: f64) -> Option<SurfaceHit> {
-        let b = &self.bounds;
-        let w = ray.origin - b.center;
-        let bb = w.dot(&ray.dir);
-        let disc = b.radius * b.radius - (w - ray.dir * bb).norm_squared();
-        if disc.is_nan() || disc < 0.0 {
+        if !sphere_meets(&self.bounds, ray, t_best) {
             return None;
         }
-        let sq = disc.sqrt();
-        if -bb + sq < ray.t_min || -bb - sq > t_best {
+        if !self.hull.meets(&ray.origin, &ray.dir, ray.t_min, t_best) {
             return None;
         }
         let (t, normal) = self.line_entry(&ray.origin, &ray.dir)?;
@@ -224,19 +240,20 @@ impl PreparedElement {
     }
 }
 
-/// First hit of a ray with a pill (two spheres and their tangent cone); see [`PreparedElement::cast`].
+/// First hit of a ray with a pill (two spheres and their tangent cone, Fig. 3.3, §3.3.2); see
+/// [`PreparedElement::cast`].
 pub fn cast_ray_pill(ray: &Ray, a: &Sphere, b: &Sphere) -> Option<SurfaceHit> {
     PreparedElement::pill(a, b)?.cast(ray)
 }
 
-/// First hit of a ray with a wedge (three spheres, three tangent cones, two tangent triangles);
-/// see [`PreparedElement::cast`].
+/// First hit of a ray with a wedge (three spheres, three tangent cones, two tangent triangles:
+/// the spherical, conical and planar primitives of Fig. 3.3, §3.3.2); see [`PreparedElement::cast`].
 pub fn cast_ray_wedge(ray: &Ray, a: &Sphere, b: &Sphere, c: &Sphere) -> Option<SurfaceHit> {
     PreparedElement::wedge(a, b, c)?.cast(ray)
 }
 
-/// First hit of a ray with one element whose indices refer to `spheres`; `None` also when an
-/// index is out of range or a sphere is invalid.
+/// First hit of a ray with one element (§3.3.2) whose indices refer to `spheres`; `None` also
+/// when an index is out of range or a sphere is invalid.
 pub fn cast_ray_element(ray: &Ray, spheres: &[Sphere], element: &Element) -> Option<SurfaceHit> {
     PreparedElement::new(spheres, element)?.cast(ray)
 }
@@ -253,10 +270,22 @@ pub fn cast_ray(ray: &Ray, spheres: &[Sphere], elements: &[Element]) -> Option<R
     }
     let mut best: Option<RayHit> = None;
     for (i, e) in elements.iter().enumerate() {
+        let t_best = best.map_or(ray.t_max, |h| h.t);
+        // Cull with the bounding sphere before paying for the preparation.
+        let mut own = [Sphere::new(V3::zeros(), 0.0); 3];
+        let idx = e.spheres();
+        if idx.iter().any(|&k| k as usize >= spheres.len()) {
+            continue;
+        }
+        for (slot, &k) in own.iter_mut().zip(idx) {
+            *slot = spheres[k as usize];
+        }
+        if !sphere_meets(&PreparedElement::bounds_of(&own[..idx.len()]), ray, t_best) {
+            continue;
+        }
         let Some(p) = PreparedElement::new(spheres, e) else {
             continue;
         };
-        let t_best = best.map_or(ray.t_max, |h| h.t);
         if let Some(h) = p.cast_unchecked(ray, t_best) {
             if best.is_none_or(|b| h.t < b.t) {
                 best = Some(RayHit {
@@ -271,8 +300,9 @@ pub fn cast_ray(ray: &Ray, spheres: &[Sphere], elements: &[Element]) -> Option<R
     best
 }
 
-/// [`cast_ray`] over elements prepared once, restricted to the listed element indices (in
-/// increasing order); used by the depth renderer.
+/// [`cast_ray`] over elements prepared once, restricted to the listed element indices (any
+/// order: front-to-back is fastest; ties still go to the lower index, so the result does not
+/// depend on the order); used by the depth renderer.
 #[inline]
 pub(crate) fn cast_prepared(
     ray: &Ray,
@@ -283,7 +313,7 @@ pub(crate) fn cast_prepared(
     for i in indices {
         let t_best = best.map_or(ray.t_max, |h| h.t);
         if let Some(h) = prepared[i].cast_unchecked(ray, t_best) {
-            if best.is_none_or(|b| h.t < b.t) {
+            if best.is_none_or(|b| h.t < b.t || (h.t == b.t && i < b.element)) {
                 best = Some(RayHit {
                     t: h.t,
                     point: h.point,
