@@ -39,7 +39,7 @@ fn push_f32s(bin: &mut Vec<u8>, values: impl Iterator<Item = f32>) {
 
 /// The `.glb` bytes of a sphere-mesh surface mesh (Fig. 3.4) (positions converted from mm to m).
 ///
-/// Errors: a triangle index out of range or a non-finite position. An empty mesh gives a valid
+/// Errors: a triangle index out of range, a non-finite position, or more than 2 GiB of data. An empty mesh gives a valid
 /// file with an empty scene and no buffer.
 pub fn encode_glb(mesh: &TriMesh) -> Result<Vec<u8>> {
     let bad = |reason: String| ModelError::InvalidArgument {
@@ -118,6 +118,12 @@ pub fn encode_glb(mesh: &TriMesh) -> Result<Vec<u8>> {
         "bufferViews": views,
         "accessors": accessors,
     });
+    if bin.len() > (u32::MAX as usize) / 2 {
+        return Err(bad(format!(
+            "{} bytes of buffer data do not fit a .glb",
+            bin.len()
+        )));
+    }
     Ok(assemble(&doc.to_string(), &bin))
 }
 

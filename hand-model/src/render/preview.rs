@@ -151,7 +151,8 @@ pub fn bone_color(name: &str) -> [u8; 3] {
 }
 
 /// Shade a §3.3.2 render: Lambert with a head light, `0.2 + 0.8·max(0, −n·d)` times the element's
-/// color (`colors[element]`, grey when missing), `background` elsewhere.
+/// color (`colors[element]`, grey when missing), `background` elsewhere. Pixels beyond the
+/// shortest of the render's buffers stay background.
 pub fn shade(
     render: &DepthRender,
     intrinsics: &Intrinsics,
@@ -159,7 +160,8 @@ pub fn shade(
     background: [u8; 3],
 ) -> RgbImage {
     let mut img = RgbImage::from_pixel(render.width, render.height, image::Rgb(background));
-    for (k, &e) in render.element.iter().enumerate() {
+    let pixels = (render.width as usize * render.height as usize).min(render.normal.len());
+    for (k, &e) in render.element.iter().take(pixels).enumerate() {
         if e == NO_ELEMENT {
             continue;
         }
@@ -222,7 +224,13 @@ pub fn render_preview(
     let colors: Vec<[u8; 3]> = template
         .elements
         .iter()
-        .map(|e| bone_color(&template.skeleton.bones()[e.bone].name))
+        .map(|e| {
+            template
+                .skeleton
+                .bones()
+                .get(e.bone)
+                .map_or([180, 180, 180], |b| bone_color(&b.name))
+        })
         .collect();
     let mut render = DepthRender::default();
     DepthRenderer::new().render(&framing.intrinsics, &spheres, &elements, &mut render)?;
