@@ -10,6 +10,8 @@
 //! - [`cylinder`]: the Ch. 2 cylinder model (26 DOF) with its front-facing projection and the
 //!   htrack `.calib` importer;
 //! - [`keypoints`]: the 21 keypoints of DESIGN.md and handedness;
+//! - [`render`]: exact ray casting of elements, a tiled CPU depth renderer (§3.3.2), mesh export
+//!   (OBJ, GLB) and PNG previews;
 //! - [`testing`]: finite-difference helpers for Jacobian tests.
 //!
 //! Units are millimetres and radians; frames follow `DESIGN.md` (model frame: origin at the back
@@ -20,6 +22,7 @@ pub mod error;
 pub mod keypoints;
 pub mod kinematics;
 pub mod math;
+pub mod render;
 pub mod shape;
 pub mod spheremesh;
 pub mod testing;

@@ -19,9 +19,11 @@ pub struct ConvertArgs {
 
 /// Run the conversion, streaming one frame at a time.
 pub fn run(args: ConvertArgs) -> Result<()> {
-    let mut reader = open_sequence(&args.input).with_context(|| format!("opening {}", args.input.display()))?;
+    let mut reader =
+        open_sequence(&args.input).with_context(|| format!("opening {}", args.input.display()))?;
     let camera = reader.camera().clone();
-    let mut writer = create_sequence(&args.output, &camera).with_context(|| format!("creating {}", args.output.display()))?;
+    let mut writer = create_sequence(&args.output, &camera)
+        .with_context(|| format!("creating {}", args.output.display()))?;
     let bar = crate::progress::frames_bar(reader.len(), "convert");
     let mut n = 0;
     while let Some(frame) = reader.next_frame() {
@@ -32,6 +34,10 @@ pub fn run(args: ConvertArgs) -> Result<()> {
     }
     writer.finish()?;
     bar.finish_and_clear();
-    eprintln!("converted {n} frames: {} → {}", args.input.display(), args.output.display());
+    eprintln!(
+        "converted {n} frames: {} → {}",
+        args.input.display(),
+        args.output.display()
+    );
     Ok(())
 }
