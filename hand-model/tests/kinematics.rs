@@ -145,7 +145,7 @@ fn rest_pose_reproduces_the_template() {
     let i = t.sphere_index("palm_back").expect("palm_back");
     assert!(rest[i].center.norm() < 1e-12);
     let i = t.sphere_index("index_base").expect("index_base");
-    assert!((rest[i].center - Vector3::new(-27.0, 57.0, 3.0)).norm() < 1e-9);
+    assert!((rest[i].center - Vector3::new(-27.0, 65.0, 3.0)).norm() < 1e-9);
     // Right hand: thumb at −x, fingers toward +y.
     let thumb = rest[t.sphere_index("thumb_top").expect("thumb")].center;
     let middle = rest[t.sphere_index("middle_top").expect("middle")].center;

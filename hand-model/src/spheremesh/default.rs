@@ -45,43 +45,43 @@ struct Finger {
 const FINGERS: [Finger; 4] = [
     Finger {
         name: "index",
-        base: [-27.0, 57.0, 3.0],
+        base: [-27.0, 65.0, 3.0],
         splay: 0.08,
-        lengths: [42.0, 24.0, 14.0],
-        radii: [9.8, 8.6, 7.2, 6.3],
+        lengths: [40.0, 23.0, 13.5],
+        radii: [10.0, 9.0, 7.8, 6.8],
         abd_limits: [-0.30, 0.35],
-        membrane: [-2.0, 16.8, 3.0],
-        membrane_radius: 2.5,
+        membrane: [-2.0, 12.0, 3.0],
+        membrane_radius: 3.0,
     },
     Finger {
         name: "middle",
-        base: [-8.0, 60.0, 4.0],
+        base: [-8.0, 67.0, 4.0],
         splay: 0.0,
-        lengths: [46.0, 28.0, 16.0],
-        radii: [9.8, 8.7, 7.3, 6.4],
+        lengths: [44.0, 26.0, 15.0],
+        radii: [10.0, 9.3, 8.0, 7.0],
         abd_limits: [-0.30, 0.40],
-        membrane: [1.0, 20.7, 3.0],
+        membrane: [1.0, 14.0, 3.0],
         membrane_radius: 3.5,
     },
     Finger {
         name: "ring",
-        base: [10.0, 57.0, 3.0],
+        base: [11.0, 65.0, 3.0],
         splay: -0.06,
-        lengths: [43.0, 27.0, 15.0],
-        radii: [9.2, 8.2, 6.9, 6.0],
+        lengths: [41.0, 26.0, 14.5],
+        radii: [9.6, 8.8, 7.6, 6.6],
         abd_limits: [-0.20, 0.30],
-        membrane: [1.0, 21.9, 3.0],
+        membrane: [1.0, 13.0, 3.0],
         membrane_radius: 3.0,
     },
     Finger {
         name: "pinky",
-        base: [26.0, 50.0, 1.0],
+        base: [27.0, 58.0, 1.0],
         splay: -0.15,
-        lengths: [34.0, 20.0, 14.0],
-        radii: [8.4, 7.2, 6.2, 5.5],
+        lengths: [32.0, 19.0, 13.0],
+        radii: [8.8, 7.8, 6.8, 6.0],
         abd_limits: [-0.35, 0.50],
-        membrane: [-1.5, 19.7, 2.5],
-        membrane_radius: 2.0,
+        membrane: [-1.5, 10.0, 2.5],
+        membrane_radius: 2.5,
     },
 ];
 
@@ -224,8 +224,8 @@ fn build() -> Result<SphereMeshTemplate> {
         t_abd_axis = -t_abd_axis;
     }
     let t_abd_local = t_rot.transpose() * t_abd_axis;
-    let thumb_cmc = Vector3::new(-22.0, 6.0, -4.0);
-    let (t1_len, t2_len, t_top) = (44.0, 32.0, 17.0);
+    let thumb_cmc = Vector3::new(-25.0, 12.0, -6.0);
+    let (t1_len, t2_len, t_top) = (42.0, 31.0, 16.0);
     let t1 = b.bone("thumb_1", Some(palm), Rigid3::new(t_rot, thumb_cmc));
     let t2 = b.bone(
         "thumb_2",
@@ -351,18 +351,18 @@ fn build() -> Result<SphereMeshTemplate> {
             f.radii[0],
         );
     }
-    let thumb_top = b.sphere_local("thumb_top", t3, Vector3::new(0.0, t_top, 0.0), 7.5);
-    b.sphere_local("thumb_middle", t3, Vector3::zeros(), 8.5);
-    b.sphere_local("thumb_bottom", t2, Vector3::zeros(), 10.5);
-    let thumb_base = b.sphere_local("thumb_base", t1, Vector3::zeros(), 15.5);
-    b.sphere_at("palm_pinky", palm, [24.0, 41.0, 2.0], 10.0);
-    b.sphere_at("palm_ring", palm, [8.0, 46.0, 3.0], 11.0);
-    b.sphere_at("palm_middle", palm, [-8.0, 48.0, 3.0], 11.5);
-    b.sphere_at("palm_index", palm, [-25.0, 46.0, 2.0], 11.0);
-    let palm_thumb = b.sphere_at("palm_thumb", palm, [-33.0, 40.0, -2.0], 4.0);
+    let thumb_top = b.sphere_local("thumb_top", t3, Vector3::new(0.0, t_top, 0.0), 8.0);
+    b.sphere_local("thumb_middle", t3, Vector3::zeros(), 9.0);
+    b.sphere_local("thumb_bottom", t2, Vector3::zeros(), 11.0);
+    let thumb_base = b.sphere_local("thumb_base", t1, Vector3::zeros(), 14.0);
+    b.sphere_at("palm_pinky", palm, [27.0, 49.0, 2.0], 11.5);
+    b.sphere_at("palm_ring", palm, [9.0, 55.0, 3.0], 12.5);
+    b.sphere_at("palm_middle", palm, [-9.0, 56.0, 3.0], 12.5);
+    b.sphere_at("palm_index", palm, [-28.0, 54.0, 2.0], 12.5);
+    let palm_thumb = b.sphere_at("palm_thumb", palm, [-36.0, 44.0, -2.0], 5.0);
     b.sphere_at("palm_back", palm, [0.0, 0.0, 0.0], 15.0);
-    b.sphere_at("palm_right", palm, [18.0, 8.0, 1.0], 15.0);
-    b.sphere_at("palm_left", palm, [-14.0, 6.0, 0.0], 15.0);
+    b.sphere_at("palm_right", palm, [22.0, 10.0, 1.0], 15.0);
+    b.sphere_at("palm_left", palm, [-20.0, 10.0, 0.0], 15.5);
     for (fi, f) in FINGERS.iter().enumerate().rev() {
         let b1 = digit_bones[fi + 1].0;
         b.sphere_local(
@@ -379,10 +379,10 @@ fn build() -> Result<SphereMeshTemplate> {
         5.0,
     );
     let tml = b.sphere_local("thumb_membrane_left", t2, Vector3::new(0.0, 12.0, 0.0), 4.0);
-    b.sphere_at("wrist_top_left", wrist, [-10.0, -4.0, 0.0], 15.0);
-    b.sphere_at("wrist_top_right", wrist, [10.0, -4.0, 0.0], 15.0);
-    b.sphere_at("wrist_bottom_left", wrist, [-10.0, -50.0, 0.0], 17.0);
-    b.sphere_at("wrist_bottom_right", wrist, [10.0, -50.0, 0.0], 17.0);
+    b.sphere_at("wrist_top_left", wrist, [-12.0, -4.0, 0.0], 15.5);
+    b.sphere_at("wrist_top_right", wrist, [12.0, -4.0, 0.0], 15.5);
+    b.sphere_at("wrist_bottom_left", wrist, [-12.0, -50.0, 0.0], 17.5);
+    b.sphere_at("wrist_bottom_right", wrist, [12.0, -50.0, 0.0], 17.5);
     b.spheres.push(SphereDef {
         name: "thumb_membrane_middle".into(),
         attachment: Attachment::Blend {
