@@ -1,13 +1,17 @@
 //! `hands model …`: show and export templates.
 
 use std::fmt::Write as _;
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 use anyhow::{bail, Context, Result};
 use clap::Subcommand;
 use hand_model::cylinder::{default_right_hand_cylinders, load_htrack_calib, CylinderModel};
 use hand_model::keypoints::KEYPOINT_NAMES;
 use hand_model::kinematics::{DofKind, Pose, Skeleton};
+use hand_model::render::glb::write_glb;
+use hand_model::render::obj::write_obj;
+use hand_model::render::preview::{write_preview_png, PreviewOptions, ViewSide};
+use hand_model::render::{extract_mesh, MeshOptions};
 use hand_model::shape::Element;
 use hand_model::spheremesh::{
     default_right_hand, import_hmodel_dir, PosedSphereMesh, ShapeBasis, SphereMeshTemplate,
@@ -25,6 +29,39 @@ pub enum ModelCommand {
         /// `.calib`, or a folder with the original hmodel/honline `C.txt R.txt B.txt I.txt`.
         template: String,
     },
+    /// Export a posed sphere-mesh template as a triangle mesh (`.obj` or `.glb`) and/or a PNG
+    /// preview rendered by the CPU ray caster.
+    ///
+    /// Example: `hands model export default --pose fist.json --out hand.glb --png hand.png`
+    Export {
+        /// A sphere-mesh template (see `hands model show --help`).
+        template: String,
+        /// Pose as JSON: `{"index_mcp_flex": 0.8, ...}` or a track/ground-truth line with a
+        /// `pose` object; DOFs not named stay 0 (the rest pose).
+        #[arg(long)]
+        pose: Option<PathBuf>,
+        /// Mesh output: `.obj` (Wavefront, with normals) or `.glb` (binary glTF, metres).
+        #[arg(long)]
+        out: Option<PathBuf>,
+        /// PNG preview output.
+        #[arg(long)]
+        png: Option<PathBuf>,
+        /// Which side the preview looks at.
+        #[arg(long, value_enum, default_value = "palm")]
+        side: Side,
+        /// Mesh resolution (mm).
+        #[arg(long, default_value_t = 1.5)]
+        cell_mm: f64,
+    },
+}
+
+/// Preview side.
+#[derive(Copy, Clone, clap::ValueEnum)]
+pub enum Side {
+    /// Looking at the palm.
+    Palm,
+    /// Looking at the back of the hand.
+    Back,
 }
 
 /// Run a model subcommand.
@@ -37,7 +74,98 @@ pub fn run(cmd: ModelCommand) -> Result<()> {
             }
             Ok(())
         }
+        ModelCommand::Export {
+            template,
+            pose,
+            out,
+            png,
+            side,
+            cell_mm,
+        } => export(
+            &template,
+            pose.as_deref(),
+            out.as_deref(),
+            png.as_deref(),
+            side,
+            cell_mm,
+        ),
     }
+}
+
+/// Read a pose file: a `{dof: value}` object or any object with a `pose` member.
+pub fn read_pose(path: &Path, skeleton: &Skeleton) -> Result<Pose> {
+    let text =
+        std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
+    let v: serde_json::Value = serde_json::from_str(text.lines().next().unwrap_or(""))
+        .or_else(|_| serde_json::from_str(&text))
+        .with_context(|| format!("{}: not JSON", path.display()))?;
+    let obj = v
+        .get("pose")
+        .unwrap_or(&v)
+        .as_object()
+        .with_context(|| format!("{}: expected a JSON object of DOF values", path.display()))?;
+    let mut named = Vec::new();
+    for (k, x) in obj {
+        let x = x
+            .as_f64()
+            .with_context(|| format!("{}: field `{k}` is not a number", path.display()))?;
+        named.push((k.as_str(), x));
+    }
+    Pose::from_named(skeleton, named).with_context(|| format!("{}: invalid pose", path.display()))
+}
+
+fn export(
+    template: &str,
+    pose: Option<&Path>,
+    out: Option<&Path>,
+    png: Option<&Path>,
+    side: Side,
+    cell_mm: f64,
+) -> Result<()> {
+    if out.is_none() && png.is_none() {
+        bail!("nothing to do: give --out hand.obj|hand.glb and/or --png preview.png");
+    }
+    let t = load_template(template)?;
+    let pose = match pose {
+        Some(p) => read_pose(p, &t.skeleton)?,
+        None => Pose::zeros(&t.skeleton),
+    };
+    if let Some(out) = out {
+        let posed = PosedSphereMesh::new(&t, &pose);
+        let elements: Vec<Element> = t.elements.iter().map(|e| e.element).collect();
+        let mesh = extract_mesh(&posed.spheres, &elements, &MeshOptions { cell_mm })?;
+        match out.extension().and_then(|e| e.to_str()) {
+            Some("obj") => write_obj(out, &mesh)?,
+            Some("glb") => write_glb(out, &mesh)?,
+            _ => bail!(
+                "{}: the mesh output must end in .obj or .glb",
+                out.display()
+            ),
+        }
+        eprintln!(
+            "wrote {} ({} vertices, {} triangles)",
+            out.display(),
+            mesh.positions.len(),
+            mesh.triangles.len()
+        );
+    }
+    if let Some(png) = png {
+        let side = match side {
+            Side::Palm => ViewSide::Palm,
+            Side::Back => ViewSide::Back,
+        };
+        write_preview_png(
+            png,
+            &t,
+            &pose,
+            &PreviewOptions {
+                side,
+                ..Default::default()
+            },
+        )?;
+        eprintln!("wrote {}", png.display());
+    }
+    Ok(())
 }
 
 /// A template of either model.
