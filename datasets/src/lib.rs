@@ -7,13 +7,19 @@
 //! - [`subjects`]: hand shapes as honline β vectors over the default template — fixed named
 //!   subjects and seeded random ones within anatomical ranges.
 //!
-//! Still to come: readers for the Handy/teaser layout, NYU and Dexter-1, and the renderer of
-//! synthetic depth sequences with exact ground truth (pose, shape and the 21 keypoints of
-//! DESIGN.md).
+//! - [`noise`]: depth-sensor models (noise-free, quantized, time of flight, structured light);
+//! - [`synth`]: synthetic depth + RGB frames (hand, forearm, blue wristband, wall) with exact
+//!   ground truth (pose, shape and the 21 keypoints of DESIGN.md);
+//! - [`sheet`]: contact sheets of depth frames with keypoints.
+//!
+//! Still to come (issue 7): readers for the Handy/teaser layout, NYU and Dexter-1.
 
 pub mod error;
 pub mod motion;
+pub mod noise;
+pub mod sheet;
 pub mod subjects;
+pub mod synth;
 
 pub use error::{DatasetError, Result};
 pub use motion::{Motion, MotionLibrary};

@@ -44,8 +44,14 @@ impl SensorModel {
             "none" | "noise-free" | "clean" => Some(SensorModel::NoiseFree),
             "quantized" | "quantization" => Some(SensorModel::Quantized),
             // 1 mm + 2.5e-5·z²: ≈ 5 mm at 400 mm, ≈ 7 mm at 500 mm.
-            "tof" | "time-of-flight" => Some(SensorModel::TimeOfFlight { sigma0: 1.0, k: 2.5e-5 }),
-            "structured" | "structured-light" | "sl" => Some(SensorModel::StructuredLight { sigma: 0.5, grazing: 75f64.to_radians() }),
+            "tof" | "time-of-flight" => Some(SensorModel::TimeOfFlight {
+                sigma0: 1.0,
+                k: 2.5e-5,
+            }),
+            "structured" | "structured-light" | "sl" => Some(SensorModel::StructuredLight {
+                sigma: 0.5,
+                grazing: 75f64.to_radians(),
+            }),
             _ => None,
         }
     }
@@ -81,14 +87,28 @@ fn gauss(rng: &mut ChaCha8Rng) -> f64 {
 /// Apply a sensor model to exact depths `depth` (mm, 0 = miss) with per-pixel outward normals
 /// `normals` (camera frame; zero where unknown) and per-pixel thin-part flags `thin` (e.g. distal
 /// phalanges). Deterministic for a given `seed`.
-pub fn apply_sensor_model(model: SensorModel, camera: &Camera, depth: &[f32], normals: &[Vector3<f32>], thin: &[bool], seed: u64, out: &mut DepthImage) {
+pub fn apply_sensor_model(
+    model: SensorModel,
+    camera: &Camera,
+    depth: &[f32],
+    normals: &[Vector3<f32>],
+    thin: &[bool],
+    seed: u64,
+    out: &mut DepthImage,
+) {
     let (w, h) = (camera.width as usize, camera.height as usize);
     out.width = camera.width;
     out.height = camera.height;
     out.data.clear();
     out.data.resize(w * h, 0);
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
-    let to_u16 = |z: f64| if z.is_finite() && z > 0.5 { z.round().min(65535.0) as u16 } else { 0 };
+    let to_u16 = |z: f64| {
+        if z.is_finite() && z > 0.5 {
+            z.round().min(65535.0) as u16
+        } else {
+            0
+        }
+    };
     match model {
         SensorModel::NoiseFree => {
             for (o, &z) in out.data.iter_mut().zip(depth) {
@@ -97,7 +117,11 @@ pub fn apply_sensor_model(model: SensorModel, camera: &Camera, depth: &[f32], no
         }
         SensorModel::Quantized => {
             for (o, &z) in out.data.iter_mut().zip(depth) {
-                *o = if z > 0.0 { to_u16(quantize_disparity(z as f64, camera.fx)) } else { 0 };
+                *o = if z > 0.0 {
+                    to_u16(quantize_disparity(z as f64, camera.fx))
+                } else {
+                    0
+                };
             }
         }
         SensorModel::TimeOfFlight { sigma0, k } => {
@@ -147,8 +171,15 @@ pub fn apply_sensor_model(model: SensorModel, camera: &Camera, depth: &[f32], no
                     nearest_disp = nearest_disp.max(disp);
                     let n = normals[i];
                     let ray = camera.backproject(u as f64, v as f64, 1.0).normalize();
-                    let facing = if n.norm_squared() > 0.0 { -(n.cast::<f64>().dot(&ray)) } else { 1.0 };
-                    let grazing_drop = facing < cos_limit && rng.random_bool(((cos_limit - facing) / cos_limit.max(1e-3) * 4.0).clamp(0.0, 1.0));
+                    let facing = if n.norm_squared() > 0.0 {
+                        -(n.cast::<f64>().dot(&ray))
+                    } else {
+                        1.0
+                    };
+                    let grazing_drop = facing < cos_limit
+                        && rng.random_bool(
+                            ((cos_limit - facing) / cos_limit.max(1e-3) * 4.0).clamp(0.0, 1.0),
+                        );
                     let thin_drop = thin[i] && rng.random_bool(0.15);
                     if shadowed || grazing_drop || thin_drop {
                         continue;

@@ -3,6 +3,7 @@
 mod convert;
 mod model;
 mod progress;
+mod synth;
 
 use clap::{Parser, Subcommand};
 
@@ -21,6 +22,8 @@ enum Command {
     Model(model::ModelCommand),
     /// Convert a sequence between the folder format and MCAP.
     Convert(convert::ConvertArgs),
+    /// Render a synthetic depth sequence with exact ground truth.
+    Synth(synth::SynthArgs),
 }
 
 fn main() -> anyhow::Result<()> {
@@ -28,5 +31,6 @@ fn main() -> anyhow::Result<()> {
     match cli.command {
         Command::Model(cmd) => model::run(cmd),
         Command::Convert(args) => convert::run(args),
+        Command::Synth(args) => synth::run(args),
     }
 }
