@@ -207,8 +207,8 @@ impl Synthesizer {
                 }
             };
             parts[i] = part;
-            for k in 0..3 {
-                color.data[3 * i + k] = (base[k] * shade).round().clamp(0.0, 255.0) as u8;
+            for (c, b) in color.data[3 * i..3 * i + 3].iter_mut().zip(base) {
+                *c = (b * shade).round().clamp(0.0, 255.0) as u8;
             }
         }
         let mut out = DepthImage::default();

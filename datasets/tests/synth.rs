@@ -7,19 +7,29 @@ use datasets::synth::{Part, SceneConfig, Synthesizer};
 use datasets::MotionLibrary;
 use hand_model::spheremesh::default_right_hand;
 use sensor_io::dt::DistanceTransform;
-use sensor_io::preprocess::{segment_depth_only, segment_wristband, DepthOnlyParams, HandSegment, WristbandParams};
+use sensor_io::preprocess::{
+    segment_depth_only, segment_wristband, DepthOnlyParams, HandSegment, WristbandParams,
+};
 use sensor_io::{Camera, Mask};
 
 fn frame_at(sensor: SensorModel, t: f64, seed: u64) -> datasets::synth::SynthFrame {
     let template = default_right_hand();
     let motion = MotionLibrary::by_name_for("teaser", 3, &template.skeleton).expect("motion");
-    let config = SceneConfig { sensor, seed, ..Default::default() };
+    let config = SceneConfig {
+        sensor,
+        seed,
+        ..Default::default()
+    };
     let mut s = Synthesizer::new(&template, &[], config).expect("synth");
     s.render(0, t, &motion.pose_at(t)).expect("render")
 }
 
 fn hand_mask(f: &datasets::synth::SynthFrame, cam: &Camera) -> Mask {
-    Mask { width: cam.width, height: cam.height, data: f.parts.iter().map(|&p| (p == Part::Hand) as u8).collect() }
+    Mask {
+        width: cam.width,
+        height: cam.height,
+        data: f.parts.iter().map(|&p| (p == Part::Hand) as u8).collect(),
+    }
 }
 
 #[test]
@@ -32,14 +42,25 @@ fn keypoints_lie_on_the_rendered_hand() {
     dt.compute(&mask);
     for (k, p) in f.keypoints_px.iter().enumerate() {
         let (u, v) = (p[0].round() as u32, p[1].round() as u32);
-        assert!(u < cam.width && v < cam.height, "keypoint {k} outside the image");
-        assert!(dt.distance(u, v) <= 3.0, "keypoint {k} is {} px off the hand", dt.distance(u, v));
+        assert!(
+            u < cam.width && v < cam.height,
+            "keypoint {k} outside the image"
+        );
+        assert!(
+            dt.distance(u, v) <= 3.0,
+            "keypoint {k} is {} px off the hand",
+            dt.distance(u, v)
+        );
     }
     // Noise-free depth equals the keypoint-consistent geometry: fingertip depth ≈ tip keypoint z.
     let tip = f.truth.keypoints[12];
     let p = f.keypoints_px[12];
     let d = f.frame.depth.get(p[0].round() as u32, p[1].round() as u32) as f64;
-    assert!((d - tip[2]).abs() < 20.0, "middle tip keypoint z {} vs depth {d}", tip[2]);
+    assert!(
+        (d - tip[2]).abs() < 20.0,
+        "middle tip keypoint z {} vs depth {d}",
+        tip[2]
+    );
 }
 
 #[test]
@@ -65,13 +86,24 @@ fn sensor_models_behave_as_documented() {
     }
     let (std, z) = ((sq / n).sqrt(), mean_z / n);
     let expected = 1.0 + 2.5e-5 * z * z;
-    assert!((std - expected).abs() < 0.25 * expected, "ToF σ {std:.2} mm at {z:.0} mm, model {expected:.2}");
-    let tof_valid = (0..hand.data.len()).filter(|&i| hand.data[i] != 0 && tof.frame.depth.data[i] != 0).count();
+    assert!(
+        (std - expected).abs() < 0.25 * expected,
+        "ToF σ {std:.2} mm at {z:.0} mm, model {expected:.2}"
+    );
+    let tof_valid = (0..hand.data.len())
+        .filter(|&i| hand.data[i] != 0 && tof.frame.depth.data[i] != 0)
+        .count();
     assert_eq!(tof_valid, hand.count(), "ToF silhouettes are complete");
     // Structured light: holes on the hand (grazing angles, thin parts, shadow), small noise.
-    let sl_valid = (0..hand.data.len()).filter(|&i| hand.data[i] != 0 && sl.frame.depth.data[i] != 0).count();
+    let sl_valid = (0..hand.data.len())
+        .filter(|&i| hand.data[i] != 0 && sl.frame.depth.data[i] != 0)
+        .count();
     let dropped = 1.0 - sl_valid as f64 / hand.count() as f64;
-    assert!((0.02..0.5).contains(&dropped), "structured light drops {:.1} % of hand pixels", 100.0 * dropped);
+    assert!(
+        (0.02..0.5).contains(&dropped),
+        "structured light drops {:.1} % of hand pixels",
+        100.0 * dropped
+    );
     eprintln!("ToF σ {std:.2} mm at {z:.0} mm (model {expected:.2}); structured light drops {:.1} % of hand pixels", 100.0 * dropped);
 }
 
@@ -81,16 +113,32 @@ fn segmentations_find_the_synthetic_hand() {
     let f = frame_at(SensorModel::by_name("tof").expect("tof"), 0.5, 2);
     let truth = hand_mask(&f, &cam);
     let iou = |m: &Mask| {
-        let inter = (0..m.data.len()).filter(|&i| m.data[i] != 0 && truth.data[i] != 0).count() as f64;
-        let union = (0..m.data.len()).filter(|&i| m.data[i] != 0 || truth.data[i] != 0).count() as f64;
+        let inter = (0..m.data.len())
+            .filter(|&i| m.data[i] != 0 && truth.data[i] != 0)
+            .count() as f64;
+        let union = (0..m.data.len())
+            .filter(|&i| m.data[i] != 0 || truth.data[i] != 0)
+            .count() as f64;
         inter / union
     };
     let mut seg = HandSegment::default();
-    segment_wristband(&f.frame.depth, f.frame.color.as_ref().expect("rgb"), &cam, &WristbandParams::default(), &mut seg);
+    segment_wristband(
+        &f.frame.depth,
+        f.frame.color.as_ref().expect("rgb"),
+        &cam,
+        &WristbandParams::default(),
+        &mut seg,
+    );
     assert!(seg.wristband.is_some(), "the blue band was not found");
     let w_iou = iou(&seg.mask);
     let mut seg2 = HandSegment::default();
-    segment_depth_only(&f.frame.depth, &cam, &DepthOnlyParams::default(), &mut seg2, &mut DistanceTransform::default());
+    segment_depth_only(
+        &f.frame.depth,
+        &cam,
+        &DepthOnlyParams::default(),
+        &mut seg2,
+        &mut DistanceTransform::default(),
+    );
     let d_iou = iou(&seg2.mask);
     eprintln!("silhouette IoU with the rendered hand: wristband {w_iou:.3}, depth-only {d_iou:.3}");
     assert!(w_iou > 0.8, "wristband segmentation IoU {w_iou:.3}");

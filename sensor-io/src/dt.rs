@@ -24,6 +24,7 @@ pub struct DistanceTransform {
     col_arg: Vec<u32>,
     env_v: Vec<usize>,
     env_z: Vec<f64>,
+    env_f: Vec<f64>,
 }
 
 const BIG: u32 = u32::MAX / 4;
@@ -51,81 +52,96 @@ impl DistanceTransform {
         self.col_arg.resize(n, 0);
         self.env_v.resize(w.max(1), 0);
         self.env_z.resize(w + 1, 0.0);
-        // Pass 1: per column, distance (in rows) to the nearest set pixel by two scans.
-        for u in 0..w {
-            let mut last: Option<usize> = None;
+        self.env_f.resize(w.max(1), 0.0);
+        // Pass 1: per column, distance (in rows) to the nearest set pixel, by a downward and an
+        // upward sweep over whole rows (contiguous memory).
+        {
+            let (d, arg) = (&mut self.col_d[..n], &mut self.col_arg[..n]);
             for v in 0..h {
-                let i = v * w + u;
-                if mask.data[i] != 0 {
-                    last = Some(v);
-                }
-                match last {
-                    Some(l) => {
-                        self.col_d[i] = (v - l) as u32;
-                        self.col_arg[i] = l as u32;
+                let row = v * w;
+                let (prev_d, cur_d) = d.split_at_mut(row);
+                let (prev_a, cur_a) = arg.split_at_mut(row);
+                let cur_d = &mut cur_d[..w];
+                let cur_a = &mut cur_a[..w];
+                let m = &mask.data[row..row + w];
+                if v == 0 {
+                    for u in 0..w {
+                        (cur_d[u], cur_a[u]) = if m[u] != 0 { (0, 0) } else { (BIG, 0) };
                     }
-                    None => self.col_d[i] = BIG,
+                } else {
+                    let pd = &prev_d[row - w..row];
+                    let pa = &prev_a[row - w..row];
+                    for u in 0..w {
+                        (cur_d[u], cur_a[u]) = if m[u] != 0 {
+                            (0, v as u32)
+                        } else if pd[u] < BIG {
+                            (pd[u] + 1, pa[u])
+                        } else {
+                            (BIG, 0)
+                        };
+                    }
                 }
             }
-            let mut next: Option<usize> = None;
-            for v in (0..h).rev() {
-                let i = v * w + u;
-                if mask.data[i] != 0 {
-                    next = Some(v);
-                }
-                if let Some(nx) = next {
-                    let d = (nx - v) as u32;
-                    if d < self.col_d[i] {
-                        self.col_d[i] = d;
-                        self.col_arg[i] = nx as u32;
+            for v in (0..h.saturating_sub(1)).rev() {
+                let row = v * w;
+                let (cur_d, next_d) = d.split_at_mut(row + w);
+                let (cur_a, next_a) = arg.split_at_mut(row + w);
+                let (cur_d, cur_a) = (&mut cur_d[row..], &mut cur_a[row..]);
+                let (nd, na) = (&next_d[..w], &next_a[..w]);
+                for u in 0..w {
+                    if nd[u] < BIG && nd[u] + 1 < cur_d[u] {
+                        cur_d[u] = nd[u] + 1;
+                        cur_a[u] = na[u];
                     }
                 }
             }
         }
-        // Pass 2: per row, lower envelope of the parabolas (u − q)² + g(q)².
+        // Pass 2: per row, lower envelope of the parabolas (u − q)² + g(q)², over the columns
+        // that have a set pixel at all (others are +∞ and never on the envelope).
         for v in 0..h {
             let row = v * w;
-            let f = |q: usize, d: &[u32]| -> f64 {
-                let g = d[row + q];
-                if g >= BIG {
-                    f64::INFINITY
-                } else {
-                    (g as f64) * (g as f64)
-                }
-            };
-            let mut k: isize = -1;
+            let mut k = 0usize;
+            let mut found = false;
             for q in 0..w {
-                let fq = f(q, &self.col_d);
-                if !fq.is_finite() {
+                let g = self.col_d[row + q];
+                if g >= BIG {
+                    continue;
+                }
+                let fq = (g as f64) * (g as f64) + (q * q) as f64;
+                if !found {
+                    found = true;
+                    k = 0;
+                    self.env_v[0] = q;
+                    self.env_f[0] = fq;
+                    self.env_z[0] = f64::NEG_INFINITY;
+                    self.env_z[1] = f64::INFINITY;
                     continue;
                 }
                 loop {
-                    if k < 0 {
-                        k = 0;
-                        self.env_v[0] = q;
-                        self.env_z[0] = f64::NEG_INFINITY;
-                        self.env_z[1] = f64::INFINITY;
-                        break;
-                    }
-                    let p = self.env_v[k as usize];
-                    let s = ((fq + (q * q) as f64) - (f(p, &self.col_d) + (p * p) as f64))
-                        / (2.0 * (q as f64 - p as f64));
-                    if s <= self.env_z[k as usize] {
+                    let p = self.env_v[k];
+                    let s = (fq - self.env_f[k]) / (2.0 * (q - p) as f64);
+                    if s <= self.env_z[k] && k > 0 {
                         k -= 1;
                         continue;
                     }
+                    if s <= self.env_z[k] {
+                        // The new parabola dominates the only one left.
+                        self.env_v[0] = q;
+                        self.env_f[0] = fq;
+                        self.env_z[1] = f64::INFINITY;
+                        break;
+                    }
                     k += 1;
-                    self.env_v[k as usize] = q;
-                    self.env_z[k as usize] = s;
-                    self.env_z[k as usize + 1] = f64::INFINITY;
+                    self.env_v[k] = q;
+                    self.env_f[k] = fq;
+                    self.env_z[k] = s;
+                    self.env_z[k + 1] = f64::INFINITY;
                     break;
                 }
             }
-            if k < 0 {
-                for u in 0..w {
-                    self.dist2[row + u] = f32::INFINITY;
-                    self.nearest[row + u] = NO_PIXEL;
-                }
+            if !found {
+                self.dist2[row..row + w].fill(f32::INFINITY);
+                self.nearest[row..row + w].fill(NO_PIXEL);
                 continue;
             }
             let mut j = 0usize;
@@ -135,7 +151,8 @@ impl DistanceTransform {
                 }
                 let q = self.env_v[j];
                 let du = u as f64 - q as f64;
-                self.dist2[row + u] = (du * du + f(q, &self.col_d)) as f32;
+                let g = self.col_d[row + q] as f64;
+                self.dist2[row + u] = (du * du + g * g) as f32;
                 self.nearest[row + u] = self.col_arg[row + q] * w as u32 + q as u32;
             }
         }

@@ -170,15 +170,34 @@ pub fn segment_depth_only(
         out.mask.data.iter_mut().for_each(|m| *m = 0);
         return;
     }
-    // Inscribed radius of every silhouette pixel: distance to the background.
-    let mut inv = Mask {
-        width: depth.width,
-        height: depth.height,
-        data: out.mask.data.iter().map(|&m| (m == 0) as u8).collect(),
-    };
+    // Inscribed radius of every silhouette pixel: distance to the background, computed on the
+    // component's bounding box (plus a background border) rather than the whole image.
+    let (mut u0, mut v0, mut u1, mut v1) = (w, h, 0, 0);
+    for (i, &m) in out.mask.data.iter().enumerate() {
+        if m != 0 {
+            let (u, v) = (i % w, i / w);
+            u0 = u0.min(u);
+            v0 = v0.min(v);
+            u1 = u1.max(u);
+            v1 = v1.max(v);
+        }
+    }
+    let (cw, ch) = (u1 - u0 + 3, v1 - v0 + 3);
+    let mut inv = Mask::zeros(cw as u32, ch as u32);
+    for (k, x) in inv.data.iter_mut().enumerate() {
+        let (cu, cv) = (k % cw, k / cw);
+        let inside = cu >= 1
+            && cv >= 1
+            && cu <= cw - 2
+            && cv <= ch - 2
+            && out.mask.data[(cv - 1 + v0) * w + (cu - 1 + u0)] != 0;
+        *x = (!inside) as u8;
+    }
     dt.compute(&inv);
     let radius_mm = |i: usize| {
-        (dt.dist2[i].sqrt() as f64) * depth.data[i] as f64 * camera.depth_unit_mm / camera.fx
+        let (u, v) = (i % w - u0 + 1, i / w - v0 + 1);
+        (dt.dist2[v * cw + u].sqrt() as f64) * depth.data[i] as f64 * camera.depth_unit_mm
+            / camera.fx
     };
     let pixels: Vec<usize> = (0..w * h).filter(|&i| out.mask.data[i] != 0).collect();
     let pts: Vec<Vector3<f64>> = pixels.iter().map(|&i| point(depth, camera, i)).collect();
@@ -237,7 +256,6 @@ pub fn segment_depth_only(
             }
         }
     }
-    inv.data.clear();
     out.count = out.mask.count();
     out.palm_center = Some(palm);
 }

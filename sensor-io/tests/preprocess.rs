@@ -1,0 +1,88 @@
+//! Issue 3, bad input to the preprocessing pipeline: empty frames, frames with nothing
+//! hand-like in range, NaN-free output, wrong image sizes.
+
+use sensor_io::preprocess::{
+    PreprocessConfig, PreprocessedFrame, Preprocessor, Segmentation, Subsampling,
+};
+use sensor_io::{Camera, DepthImage, Frame};
+
+fn frame(depth: DepthImage) -> Frame {
+    Frame {
+        index: 0,
+        timestamp: 0.0,
+        depth,
+        color: None,
+    }
+}
+
+#[test]
+fn empty_and_handless_frames_give_an_empty_hand() {
+    let cam = Camera::sr300_qvga();
+    let mut out = PreprocessedFrame::default();
+    for sub in [Subsampling::Uniform, Subsampling::Farthest] {
+        let mut pre = Preprocessor::new(PreprocessConfig {
+            subsampling: sub,
+            ..Default::default()
+        });
+        // No valid depth at all.
+        pre.process(&frame(DepthImage::zeros(320, 240)), &cam, &mut out)
+            .expect("empty frame");
+        assert_eq!(out.hand.count, 0);
+        assert!(out.points.is_empty());
+        // Only a far wall, beyond the working range.
+        let mut wall = DepthImage::zeros(320, 240);
+        wall.data.iter_mut().for_each(|d| *d = 3000);
+        pre.process(&frame(wall), &cam, &mut out).expect("far wall");
+        assert_eq!(out.hand.count, 0);
+        // Salt noise: isolated pixels are not a hand.
+        let mut salt = DepthImage::zeros(320, 240);
+        for i in (0..salt.data.len()).step_by(97) {
+            salt.data[i] = 400 + (i % 300) as u16;
+        }
+        pre.process(&frame(salt), &cam, &mut out).expect("salt");
+        assert_eq!(out.hand.count, 0, "isolated pixels segmented as a hand");
+    }
+    // Wristband segmentation without a color image: an empty hand, not an error.
+    let mut pre = Preprocessor::new(PreprocessConfig {
+        segmentation: Segmentation::Wristband(Default::default()),
+        ..Default::default()
+    });
+    let mut blob = DepthImage::zeros(320, 240);
+    for v in 100..140 {
+        for u in 140..180 {
+            blob.data[v * 320 + u] = 420;
+        }
+    }
+    pre.process(&frame(blob.clone()), &cam, &mut out)
+        .expect("no color");
+    assert_eq!(out.hand.count, 0);
+    // A hand-sized blob is found, with finite points and unit normals.
+    let mut pre = Preprocessor::new(PreprocessConfig::default());
+    pre.process(&frame(blob), &cam, &mut out).expect("blob");
+    assert!(out.hand.count > 1000);
+    assert!(out.points.iter().all(|p| p.iter().all(|x| x.is_finite())));
+    assert!(out
+        .normals
+        .iter()
+        .all(|n| n.norm() == 0.0 || (n.norm() - 1.0).abs() < 1e-9));
+}
+
+#[test]
+fn wrong_sizes_are_errors() {
+    let cam = Camera::sr300_qvga();
+    let mut out = PreprocessedFrame::default();
+    let mut pre = Preprocessor::new(PreprocessConfig::default());
+    let err = pre
+        .process(&frame(DepthImage::zeros(640, 480)), &cam, &mut out)
+        .expect_err("size");
+    assert!(err.to_string().contains("640"), "{err}");
+    let bad = Frame {
+        depth: DepthImage {
+            width: 320,
+            height: 240,
+            data: vec![0; 10],
+        },
+        ..frame(DepthImage::zeros(1, 1))
+    };
+    assert!(pre.process(&bad, &cam, &mut out).is_err());
+}
