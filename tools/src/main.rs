@@ -1,6 +1,7 @@
 //! The `hands` command-line interface (DESIGN.md "CLI surface").
 
 mod convert;
+mod demo;
 mod model;
 mod progress;
 mod synth;
@@ -17,6 +18,8 @@ struct Cli {
 
 #[derive(Subcommand)]
 enum Command {
+    /// The main job on the embedded default: synthesize, preprocess and score (no input files).
+    Demo(demo::DemoArgs),
     /// Inspect and export hand templates.
     #[command(subcommand)]
     Model(model::ModelCommand),
@@ -29,6 +32,7 @@ enum Command {
 fn main() -> anyhow::Result<()> {
     let cli = Cli::parse();
     match cli.command {
+        Command::Demo(args) => demo::run(args),
         Command::Model(cmd) => model::run(cmd),
         Command::Convert(args) => convert::run(args),
         Command::Synth(args) => synth::run(args),

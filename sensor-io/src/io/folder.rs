@@ -16,6 +16,11 @@ use crate::record::HandRecord;
 /// Read `camera.json`, naming the missing or invalid field on error.
 pub fn read_camera_json(path: &Path) -> Result<Camera> {
     let text = std::fs::read_to_string(path).map_err(|e| SensorError::io(path, e))?;
+    parse_camera_json(&text, path)
+}
+
+/// [`read_camera_json`] on text already in memory; `path` names it in errors.
+pub fn parse_camera_json(text: &str, path: &Path) -> Result<Camera> {
     let v: serde_json::Value = serde_json::from_str(&text)
         .map_err(|e| SensorError::format(path, format!("invalid JSON: {e}")))?;
     let num = |k: &str| -> Result<f64> {

@@ -7,12 +7,15 @@ mod png;
 
 use std::path::Path;
 
-pub use folder::{read_camera_json, FolderReader, FolderWriter};
+pub use folder::{parse_camera_json, read_camera_json, FolderReader, FolderWriter};
 pub use mcap_seq::{
     McapReader, McapWriter, CALIBRATION_TOPIC, COLOR_TOPIC, DEPTH_TOPIC, GROUNDTRUTH_TOPIC,
     TRACK_TOPIC,
 };
-pub use png::{read_color_png, read_depth_png, write_atomic, write_color_png, write_depth_png};
+pub use png::{
+    decode_depth_png, read_color_png, read_depth_png, write_atomic, write_color_png,
+    write_depth_png,
+};
 
 use crate::camera::Camera;
 use crate::error::Result;

@@ -37,14 +37,24 @@ pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
 
 fn decode(path: &Path) -> Result<DynamicImage> {
     let bytes = std::fs::read(path).map_err(|e| SensorError::io(path, e))?;
-    image::load_from_memory_with_format(&bytes, ImageFormat::Png)
+    decode_bytes(&bytes, path)
+}
+
+fn decode_bytes(bytes: &[u8], path: &Path) -> Result<DynamicImage> {
+    image::load_from_memory_with_format(bytes, ImageFormat::Png)
         .map_err(|e| SensorError::format(path, format!("not a readable PNG: {e}")))
 }
 
 /// Read a 16-bit single-channel PNG of depths in mm. Refused: other bit depths or channel counts
 /// (an 8-bit PNG would silently lose depth), corrupt or truncated files.
 pub fn read_depth_png(path: &Path) -> Result<DepthImage> {
-    match decode(path)? {
+    let bytes = std::fs::read(path).map_err(|e| SensorError::io(path, e))?;
+    decode_depth_png(&bytes, path)
+}
+
+/// [`read_depth_png`] on bytes already in memory; `path` names them in errors.
+pub fn decode_depth_png(bytes: &[u8], path: &Path) -> Result<DepthImage> {
+    match decode_bytes(bytes, path)? {
         DynamicImage::ImageLuma16(img) => {
             let (w, h) = img.dimensions();
             DepthImage::from_data(w, h, img.into_raw())

@@ -1,0 +1,183 @@
+//! End-to-end checks of the `hands` binary: the demo, synth → convert round trips, model
+//! show/export, and clear errors (non-zero exit, a message naming the problem) on bad input.
+
+use std::path::PathBuf;
+use std::process::Command;
+
+fn hands(args: &[&str]) -> (bool, String) {
+    let out = Command::new(env!("CARGO_BIN_EXE_hands"))
+        .args(args)
+        .env("RUST_BACKTRACE", "0")
+        .output()
+        .expect("run hands");
+    (
+        out.status.success(),
+        format!(
+            "{}{}",
+            String::from_utf8_lossy(&out.stdout),
+            String::from_utf8_lossy(&out.stderr)
+        ),
+    )
+}
+
+fn tmp(name: &str) -> PathBuf {
+    let d = std::env::temp_dir().join(format!("hands-cli-{}-{name}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&d);
+    std::fs::create_dir_all(&d).expect("tmp");
+    d
+}
+
+#[test]
+fn demo_runs_on_the_embedded_default() {
+    let d = tmp("demo");
+    let (ok, text) = hands(&["demo", "--frames", "6", "--out", d.to_str().expect("utf8")]);
+    assert!(ok, "{text}");
+    assert!(text.contains("IoU"), "{text}");
+    assert!(
+        d.join("teaser.mcap").exists()
+            && d.join("template.png").exists()
+            && d.join("teaser-sheet.png").exists()
+    );
+}
+
+#[test]
+fn synth_and_convert_round_trip() {
+    let d = tmp("synth");
+    let folder = d.join("seq");
+    let mcap = d.join("seq.mcap");
+    let back = d.join("back");
+    let s = |p: &PathBuf| p.to_str().expect("utf8").to_string();
+    let (ok, text) = hands(&[
+        "synth",
+        "--motion",
+        "pinch",
+        "--frames",
+        "5",
+        "--noise",
+        "structured",
+        "--subject",
+        "random",
+        "--out",
+        &s(&folder),
+        "--preview",
+        &s(&d.join("sheet.png")),
+    ]);
+    assert!(ok, "{text}");
+    assert_eq!(
+        std::fs::read_dir(folder.join("depth"))
+            .expect("depth")
+            .count(),
+        5
+    );
+    let gt = std::fs::read_to_string(folder.join("groundtruth.jsonl")).expect("gt");
+    assert_eq!(gt.lines().count(), 5);
+    assert!(
+        gt.contains("\"keypoints\"")
+            && gt.contains("\"index_mcp_flex\"")
+            && gt.contains("\"middle_bottom_length\"")
+    );
+    let (ok, text) = hands(&["convert", &s(&folder), &s(&mcap)]);
+    assert!(ok, "{text}");
+    let (ok, text) = hands(&["convert", &s(&mcap), &s(&back)]);
+    assert!(ok, "{text}");
+    for k in 0..5 {
+        let name = format!("depth/{k:06}.png");
+        assert_eq!(
+            std::fs::read(folder.join(&name)).ok().map(|b| b.len() > 0),
+            Some(true)
+        );
+        let a = sensor_png(&folder.join(&name));
+        let b = sensor_png(&back.join(&name));
+        assert_eq!(a, b, "frame {k} differs after folder → MCAP → folder");
+    }
+    let gt_back = std::fs::read_to_string(back.join("groundtruth.jsonl")).expect("gt back");
+    assert!(
+        gt_back == gt,
+        "ground truth changed after folder → MCAP → folder"
+    );
+}
+
+fn sensor_png(p: &std::path::Path) -> Vec<u16> {
+    image::open(p).expect("png").to_luma16().into_raw()
+}
+
+#[test]
+fn model_show_and_export() {
+    let d = tmp("model");
+    let (ok, text) = hands(&["model", "show", "default"]);
+    assert!(
+        ok && text.contains("39 spheres") && text.contains("index_mcp_flex"),
+        "{text}"
+    );
+    let (ok, text) = hands(&["model", "show", "default-cylinders"]);
+    assert!(ok && text.contains("16 segments"), "{text}");
+    let obj = d.join("hand.obj");
+    let (ok, text) = hands(&[
+        "model",
+        "export",
+        "default",
+        "--out",
+        obj.to_str().expect("utf8"),
+        "--cell-mm",
+        "3",
+    ]);
+    assert!(ok, "{text}");
+    let body = std::fs::read_to_string(&obj).expect("obj");
+    assert!(body.lines().filter(|l| l.starts_with("v ")).count() > 1000);
+}
+
+#[test]
+fn bad_inputs_fail_clearly() {
+    let d = tmp("bad");
+    let cases: Vec<(Vec<String>, &str)> = vec![
+        (
+            vec!["model".into(), "show".into(), "no-such-template".into()],
+            "no-such-template",
+        ),
+        (
+            vec![
+                "synth".into(),
+                "--motion".into(),
+                "moonwalk".into(),
+                "--out".into(),
+                d.join("x").display().to_string(),
+            ],
+            "moonwalk",
+        ),
+        (
+            vec![
+                "synth".into(),
+                "--noise".into(),
+                "laser".into(),
+                "--out".into(),
+                d.join("y").display().to_string(),
+            ],
+            "laser",
+        ),
+        (
+            vec![
+                "synth".into(),
+                "--fps".into(),
+                "NaN".into(),
+                "--out".into(),
+                d.join("z").display().to_string(),
+            ],
+            "fps",
+        ),
+        (
+            vec![
+                "convert".into(),
+                d.join("missing").display().to_string(),
+                d.join("o.mcap").display().to_string(),
+            ],
+            "missing",
+        ),
+    ];
+    for (args, needle) in cases {
+        let refs: Vec<&str> = args.iter().map(|s| s.as_str()).collect();
+        let (ok, text) = hands(&refs);
+        assert!(!ok, "{args:?} succeeded");
+        assert!(text.contains(needle), "{args:?}: {text}");
+        assert!(!text.contains("panicked"), "{args:?} panicked: {text}");
+    }
+}
