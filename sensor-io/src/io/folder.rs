@@ -21,7 +21,7 @@ pub fn read_camera_json(path: &Path) -> Result<Camera> {
 
 /// [`read_camera_json`] on text already in memory; `path` names it in errors.
 pub fn parse_camera_json(text: &str, path: &Path) -> Result<Camera> {
-    let v: serde_json::Value = serde_json::from_str(&text)
+    let v: serde_json::Value = serde_json::from_str(text)
         .map_err(|e| SensorError::format(path, format!("invalid JSON: {e}")))?;
     let num = |k: &str| -> Result<f64> {
         v.get(k)
