@@ -83,7 +83,9 @@ fn synth_and_convert_round_trip() {
     for k in 0..5 {
         let name = format!("depth/{k:06}.png");
         assert_eq!(
-            std::fs::read(folder.join(&name)).ok().map(|b| b.len() > 0),
+            std::fs::read(folder.join(&name))
+                .ok()
+                .map(|b| !b.is_empty()),
             Some(true)
         );
         let a = sensor_png(&folder.join(&name));
