@@ -6,4 +6,5 @@
 //! Units are millimetres and radians; frames follow `DESIGN.md` (model frame: origin at the back
 //! of the palm near the wrist, +y toward the fingertips, palm facing −z; camera frame: OpenCV).
 
+pub mod query;
 pub mod shape;

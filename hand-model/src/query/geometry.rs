@@ -1,0 +1,303 @@
+//! A posed sphere-mesh prepared for queries: per-element tangent planes and bounding balls,
+//! refreshed once per solver iteration, and the model-wide closest-point projection
+//! `Π_M(p)` (Eq. 3.6: the element with the smallest `φ_e(p)` wins).
+
+use super::bounding::BoundingBall;
+use super::point_pill::{valid_sphere, PillFrame};
+use super::point_wedge::WedgeFrame;
+use super::{is_finite, Projection};
+use crate::shape::{Element, Sphere};
+use nalgebra::Vector3;
+
+/// Elements up to this count keep their lower bounds in a stack buffer during a query; larger
+/// models recompute them (still without allocating).
+const STACK_ELEMENTS: usize = 64;
+
+/// Why a [`SphereMeshGeometry`] could not be built or updated.
+#[derive(Copy, Clone, Debug, PartialEq, thiserror::Error)]
+pub enum GeometryError {
+    /// An element names a sphere that does not exist.
+    #[error("element {element} refers to sphere {sphere}, but the model has {count} spheres")]
+    SphereIndexOutOfRange {
+        /// Element index.
+        element: usize,
+        /// The offending sphere index.
+        sphere: u32,
+        /// Number of spheres.
+        count: usize,
+    },
+    /// A sphere has a non-finite center or radius, or a negative radius.
+    #[error("sphere {index} has a non-finite center or radius, or a negative radius")]
+    InvalidSphere {
+        /// Sphere index.
+        index: usize,
+    },
+    /// [`SphereMeshGeometry::update`] got a different number of spheres than the model has.
+    #[error("expected {expected} spheres, got {got}")]
+    SphereCountMismatch {
+        /// Number of spheres of the model.
+        expected: usize,
+        /// Number of spheres passed.
+        got: usize,
+    },
+}
+
+/// The per-pose data of one element.
+#[derive(Copy, Clone, Debug, PartialEq)]
+pub(crate) enum ElementFrame {
+    Pill(PillFrame),
+    Wedge(WedgeFrame),
+}
+
+impl ElementFrame {
+    #[inline]
+    pub(crate) fn distance(&self, p: &Vector3<f64>) -> f64 {
+        match self {
+            ElementFrame::Pill(f) => f.distance(p),
+            ElementFrame::Wedge(f) => f.distance(p),
+        }
+    }
+
+    #[inline]
+    pub(crate) fn project(&self, p: &Vector3<f64>) -> Projection {
+        match self {
+            ElementFrame::Pill(f) => f.project(p),
+            ElementFrame::Wedge(f) => f.project(p),
+        }
+    }
+
+    pub(crate) fn centers(&self) -> &[Vector3<f64>] {
+        match self {
+            ElementFrame::Pill(f) => &f.centers,
+            ElementFrame::Wedge(f) => &f.centers,
+        }
+    }
+
+    pub(crate) fn radii(&self) -> &[f64] {
+        match self {
+            ElementFrame::Pill(f) => &f.radii,
+            ElementFrame::Wedge(f) => &f.radii,
+        }
+    }
+
+    fn build(element: &Element, spheres: &[Sphere]) -> Self {
+        let s = |i: u32| &spheres[i as usize];
+        match element {
+            Element::Pill([a, b]) => ElementFrame::Pill(PillFrame::new(s(*a), s(*b))),
+            Element::Wedge([a, b, c]) => ElementFrame::Wedge(WedgeFrame::new([s(*a), s(*b), s(*c)])),
+        }
+    }
+
+    fn bound(&self) -> BoundingBall {
+        match self {
+            ElementFrame::Pill(f) => BoundingBall::of_pill(f),
+            ElementFrame::Wedge(f) => BoundingBall::of_wedge(f),
+        }
+    }
+}
+
+/// A posed sphere-mesh `M` (Eq. 3.1) prepared for closest-point queries (§3.3.1): it caches,
+/// per element, the tangent planes of wedges and a bounding ball, so that
+/// [`project`](Self::project) evaluates the closed-form projections of Fig. 3.7 only on the few
+/// elements that can win the argmin of Eq. 3.6.
+///
+/// Build it once per model with [`new`](Self::new), then call [`update`](Self::update) with the
+/// posed spheres every solver iteration; `update` and every query allocate nothing.
+#[derive(Clone, Debug)]
+pub struct SphereMeshGeometry {
+    pub(super) spheres: Vec<Sphere>,
+    pub(super) elements: Vec<Element>,
+    pub(super) frames: Vec<ElementFrame>,
+    pub(super) bounds: Vec<BoundingBall>,
+}
+
+impl SphereMeshGeometry {
+    /// Prepares the sphere-mesh with these spheres and elements (thesis §3.1, Fig. 3.4).
+    pub fn new(spheres: &[Sphere], elements: &[Element]) -> Result<Self, GeometryError> {
+        check_spheres(spheres)?;
+        for (e, el) in elements.iter().enumerate() {
+            if let Some(&sphere) = el.spheres().iter().find(|&&i| i as usize >= spheres.len()) {
+                return Err(GeometryError::SphereIndexOutOfRange {
+                    element: e,
+                    sphere,
+                    count: spheres.len(),
+                });
+            }
+        }
+        let frames: Vec<ElementFrame> = elements
+            .iter()
+            .map(|el| ElementFrame::build(el, spheres))
+            .collect();
+        let bounds = frames.iter().map(ElementFrame::bound).collect();
+        Ok(Self {
+            spheres: spheres.to_vec(),
+            elements: elements.to_vec(),
+            frames,
+            bounds,
+        })
+    }
+
+    /// Re-poses the model with new sphere centers and radii (same count and order as in
+    /// [`new`](Self::new)), recomputing tangent planes and bounding balls. Allocates nothing.
+    /// On error the geometry is left unchanged.
+    pub fn update(&mut self, spheres: &[Sphere]) -> Result<(), GeometryError> {
+        if spheres.len() != self.spheres.len() {
+            return Err(GeometryError::SphereCountMismatch {
+                expected: self.spheres.len(),
+                got: spheres.len(),
+            });
+        }
+        check_spheres(spheres)?;
+        self.spheres.copy_from_slice(spheres);
+        for ((frame, bound), el) in self
+            .frames
+            .iter_mut()
+            .zip(self.bounds.iter_mut())
+            .zip(&self.elements)
+        {
+            *frame = ElementFrame::build(el, spheres);
+            *bound = frame.bound();
+        }
+        Ok(())
+    }
+
+    /// The spheres of the current pose.
+    pub fn spheres(&self) -> &[Sphere] {
+        &self.spheres
+    }
+
+    /// The elements (pills and wedges).
+    pub fn elements(&self) -> &[Element] {
+        &self.elements
+    }
+
+    /// The bounding ball of each element in the current pose.
+    pub fn bounding_balls(&self) -> &[BoundingBall] {
+        &self.bounds
+    }
+
+    /// The model's implicit function `φ_M(p) = min_e φ_e(p)` (Eq. 3.6) as a signed distance:
+    /// exact outside the model; inside, the depth in the element that contains `p` most deeply
+    /// (a lower bound of the depth in the union where elements overlap). `None` for a non-finite
+    /// point or a model without elements.
+    pub fn phi(&self, p: &Vector3<f64>) -> Option<f64> {
+        if !is_finite(p) {
+            return None;
+        }
+        self.nearest(p).map(|(_, d)| d)
+    }
+
+    /// Signed distance from `p` to element `element` alone (`φ_e(p)`, Eq. 3.1 on one element).
+    /// `None` for a non-finite point or an out-of-range index.
+    pub fn phi_element(&self, element: usize, p: &Vector3<f64>) -> Option<f64> {
+        if !is_finite(p) {
+            return None;
+        }
+        self.frames.get(element).map(|f| f.distance(p))
+    }
+
+    /// Closest-point projection on one element (Fig. 3.7), with global sphere indices.
+    /// `None` for a non-finite point or an out-of-range index.
+    pub fn project_on_element(&self, element: usize, p: &Vector3<f64>) -> Option<Projection> {
+        if !is_finite(p) {
+            return None;
+        }
+        let frame = self.frames.get(element)?;
+        Some(self.globalize(element, frame.project(p)))
+    }
+
+    /// The model-wide closest-point projection `q = Π_M(p)` (Eq. 3.6): the footpoint on the
+    /// element with the smallest signed distance `φ_e(p)`. Its outward normal is
+    /// [`Projection::normal`] and its signed distance `φ_M(p)` is [`Projection::distance`].
+    ///
+    /// Elements are culled with their bounding balls: the element with the smallest lower bound
+    /// `‖p − C_e‖ − R_e` is evaluated first, and any other element is evaluated only if its bound
+    /// is below the best distance found. `None` for a non-finite point or a model without
+    /// elements.
+    pub fn project(&self, p: &Vector3<f64>) -> Option<Projection> {
+        if !is_finite(p) {
+            return None;
+        }
+        let (e, _) = self.nearest(p)?;
+        Some(self.globalize(e, self.frames[e].project(p)))
+    }
+
+    /// [`project`](Self::project) for many points, writing into `out` (same length as
+    /// `points`). Allocates nothing.
+    ///
+    /// # Panics
+    /// If `out.len() != points.len()`.
+    #[track_caller]
+    pub fn project_points(&self, points: &[Vector3<f64>], out: &mut [Option<Projection>]) {
+        assert_eq!(points.len(), out.len(), "one output slot per point");
+        for (p, o) in points.iter().zip(out.iter_mut()) {
+            *o = self.project(p);
+        }
+    }
+
+    /// Whether `x` lies inside some element by more than `tol` (`φ_M(x) < −tol`): such a point
+    /// of an element's surface is buried in another element and is not on the model's surface.
+    pub fn is_buried(&self, x: &Vector3<f64>, tol: f64) -> bool {
+        self.frames.iter().zip(&self.bounds).any(|(f, b)| {
+            let reach = b.radius - tol;
+            reach > 0.0 && (x - b.center).norm_squared() < reach * reach && f.distance(x) < -tol
+        })
+    }
+
+    /// The element minimising `φ_e(p)` and that minimum (`p` finite).
+    pub(super) fn nearest(&self, p: &Vector3<f64>) -> Option<(usize, f64)> {
+        let n = self.frames.len();
+        if n == 0 {
+            return None;
+        }
+        let lower = |e: usize| {
+            let b = &self.bounds[e];
+            (p - b.center).norm() - b.radius
+        };
+        let mut buffer = [0.0; STACK_ELEMENTS];
+        let stored = n <= STACK_ELEMENTS;
+        let mut first = 0;
+        let mut first_bound = f64::INFINITY;
+        for e in 0..n {
+            let lb = lower(e);
+            if stored {
+                buffer[e] = lb;
+            }
+            if lb < first_bound {
+                first_bound = lb;
+                first = e;
+            }
+        }
+        let mut best = self.frames[first].distance(p);
+        let mut best_e = first;
+        for e in 0..n {
+            if e == first {
+                continue;
+            }
+            let lb = if stored { buffer[e] } else { lower(e) };
+            if lb < best {
+                let d = self.frames[e].distance(p);
+                if d < best {
+                    best = d;
+                    best_e = e;
+                }
+            }
+        }
+        Some((best_e, best))
+    }
+
+    /// Re-expresses an element-local projection over the model's sphere indices.
+    pub(super) fn globalize(&self, element: usize, mut pr: Projection) -> Projection {
+        let ids = self.elements[element].spheres();
+        pr.spheres = pr.spheres.map(|l| ids[l as usize]);
+        pr.element = element as u32;
+        pr
+    }
+}
+
+fn check_spheres(spheres: &[Sphere]) -> Result<(), GeometryError> {
+    match spheres.iter().position(|s| !valid_sphere(s)) {
+        Some(index) => Err(GeometryError::InvalidSphere { index }),
+        None => Ok(()),
+    }
+}
