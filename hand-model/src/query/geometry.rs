@@ -3,15 +3,12 @@
 //! `Π_M(p)` (Eq. 3.6: the element with the smallest `φ_e(p)` wins).
 
 use super::bounding::BoundingBall;
+use super::bvh::ElementTree;
 use super::point_pill::{valid_sphere, PillFrame};
 use super::point_wedge::WedgeFrame;
 use super::{is_finite, Projection};
 use crate::shape::{Element, Sphere};
 use nalgebra::Vector3;
-
-/// Elements up to this count keep their lower bounds in a stack buffer during a query; larger
-/// models recompute them (still without allocating).
-const STACK_ELEMENTS: usize = 64;
 
 /// Why a [`SphereMeshGeometry`] could not be built or updated.
 #[derive(Copy, Clone, Debug, PartialEq, thiserror::Error)]
@@ -55,6 +52,15 @@ impl ElementFrame {
         match self {
             ElementFrame::Pill(f) => f.distance(p),
             ElementFrame::Wedge(f) => f.distance(p),
+        }
+    }
+
+    /// The distance when it is below `best`, otherwise some value `≥ best`.
+    #[inline]
+    pub(crate) fn distance_below(&self, p: &Vector3<f64>, best: f64) -> f64 {
+        match self {
+            ElementFrame::Pill(f) => f.distance(p),
+            ElementFrame::Wedge(f) => f.distance_below(p, best),
         }
     }
 
@@ -109,6 +115,10 @@ pub struct SphereMeshGeometry {
     pub(super) elements: Vec<Element>,
     pub(super) frames: Vec<ElementFrame>,
     pub(super) bounds: Vec<BoundingBall>,
+    /// The bounding balls again as packed `[x, y, z, R]`, for the culling loop.
+    pub(super) packed: Vec<[f64; 4]>,
+    /// Bounding-ball hierarchy over the elements, for a first guess of the nearest element.
+    tree: ElementTree,
 }
 
 impl SphereMeshGeometry {
@@ -128,11 +138,13 @@ impl SphereMeshGeometry {
             .iter()
             .map(|el| ElementFrame::build(el, spheres))
             .collect();
-        let bounds = frames.iter().map(ElementFrame::bound).collect();
+        let bounds: Vec<BoundingBall> = frames.iter().map(ElementFrame::bound).collect();
         Ok(Self {
             spheres: spheres.to_vec(),
             elements: elements.to_vec(),
             frames,
+            packed: bounds.iter().map(pack).collect(),
+            tree: ElementTree::build(&bounds),
             bounds,
         })
     }
@@ -158,6 +170,10 @@ impl SphereMeshGeometry {
             *frame = ElementFrame::build(el, spheres);
             *bound = frame.bound();
         }
+        for (packed, b) in self.packed.iter_mut().zip(&self.bounds) {
+            *packed = pack(b);
+        }
+        self.tree.refit(&self.bounds);
         Ok(())
     }
 
@@ -210,9 +226,8 @@ impl SphereMeshGeometry {
     /// element with the smallest signed distance `φ_e(p)`. Its outward normal is
     /// [`Projection::normal`] and its signed distance `φ_M(p)` is [`Projection::distance`].
     ///
-    /// Elements are culled with their bounding balls: the element with the smallest lower bound
-    /// `‖p − C_e‖ − R_e` is evaluated first, and any other element is evaluated only if its bound
-    /// is below the best distance found. `None` for a non-finite point or a model without
+    /// Elements are culled with their bounding balls: an element is evaluated only if its lower
+    /// bound `‖p − C_e‖ − R_e` is below the best distance found so far. `None` for a non-finite point or a model without
     /// elements.
     pub fn project(&self, p: &Vector3<f64>) -> Option<Projection> {
         if !is_finite(p) {
@@ -236,47 +251,50 @@ impl SphereMeshGeometry {
     }
 
     /// Whether `x` lies inside some element by more than `tol` (`φ_M(x) < −tol`): such a point
-    /// of an element's surface is buried in another element and is not on the model's surface.
+    /// of an element's surface is buried in another element and is not on the model's surface
+    /// (the merge test of the thesis's silhouette computation, §3.3.1). `false` for a
+    /// non-finite `x`.
     pub fn is_buried(&self, x: &Vector3<f64>, tol: f64) -> bool {
-        self.frames.iter().zip(&self.bounds).any(|(f, b)| {
-            let reach = b.radius - tol;
-            reach > 0.0 && (x - b.center).norm_squared() < reach * reach && f.distance(x) < -tol
-        })
+        is_finite(x) && self.burier(x, tol, 0).is_some()
+    }
+
+    /// The element burying `x` (`φ_e(x) < −tol`), trying `hint` first. Bounding balls cull the
+    /// scan: `x` can be inside `e` by more than `tol` only if `‖x − C_e‖ < R_e − tol`.
+    pub(super) fn burier(&self, x: &Vector3<f64>, tol: f64, hint: usize) -> Option<usize> {
+        let inside = |e: usize, &[bx, by, bz, radius]: &[f64; 4]| {
+            let reach = radius - tol;
+            let (dx, dy, dz) = (x.x - bx, x.y - by, x.z - bz);
+            reach > 0.0
+                && dx * dx + dy * dy + dz * dz < reach * reach
+                && self.frames[e].distance(x) < -tol
+        };
+        if let Some(b) = self.packed.get(hint) {
+            if inside(hint, b) {
+                return Some(hint);
+            }
+        }
+        self.packed
+            .iter()
+            .enumerate()
+            .position(|(e, b)| e != hint && inside(e, b))
     }
 
     /// The element minimising `φ_e(p)` and that minimum (`p` finite).
+    ///
+    /// Branch and bound: a greedy descent of the bounding-ball tree guesses an element and its
+    /// distance `d`; then every other element is evaluated only if its bound `‖p − C_e‖ − R_e` is
+    /// below the best `d` so far, tested without square roots (`d + R_e > 0` and
+    /// `‖p − C_e‖² < (d + R_e)²`).
     pub(super) fn nearest(&self, p: &Vector3<f64>) -> Option<(usize, f64)> {
-        let n = self.frames.len();
-        if n == 0 {
-            return None;
-        }
-        let lower = |e: usize| {
-            let b = &self.bounds[e];
-            (p - b.center).norm() - b.radius
-        };
-        let mut buffer = [0.0; STACK_ELEMENTS];
-        let stored = n <= STACK_ELEMENTS;
-        let mut first = 0;
-        let mut first_bound = f64::INFINITY;
-        for e in 0..n {
-            let lb = lower(e);
-            if stored {
-                buffer[e] = lb;
-            }
-            if lb < first_bound {
-                first_bound = lb;
-                first = e;
-            }
-        }
+        let first = self.tree.guess(p)?;
         let mut best = self.frames[first].distance(p);
         let mut best_e = first;
-        for e in 0..n {
-            if e == first {
-                continue;
-            }
-            let lb = if stored { buffer[e] } else { lower(e) };
-            if lb < best {
-                let d = self.frames[e].distance(p);
+        for (e, (&[x, y, z, radius], frame)) in self.packed.iter().zip(&self.frames).enumerate() {
+            let (dx, dy, dz) = (p.x - x, p.y - y, p.z - z);
+            let d2 = dx * dx + dy * dy + dz * dz;
+            let t = best + radius;
+            if t > 0.0 && d2 < t * t && e != first {
+                let d = frame.distance_below(p, best);
                 if d < best {
                     best = d;
                     best_e = e;
@@ -293,6 +311,10 @@ impl SphereMeshGeometry {
         pr.element = element as u32;
         pr
     }
+}
+
+fn pack(b: &BoundingBall) -> [f64; 4] {
+    [b.center.x, b.center.y, b.center.z, b.radius]
 }
 
 fn check_spheres(spheres: &[Sphere]) -> Result<(), GeometryError> {

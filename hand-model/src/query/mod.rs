@@ -20,7 +20,9 @@
 //! # Non-finite input
 //! Queries with a non-finite point return `None`; nothing in this module panics on finite input.
 
+mod bounded_heap;
 mod bounding;
+mod bvh;
 mod front_facing;
 mod geometry;
 mod implicit;

@@ -18,6 +18,8 @@ use nalgebra::Vector3;
 /// Below this `h = √(1 − k²)` one sphere contains the other to machine precision and the cone
 /// has no extent; treating the pill as the larger ball avoids dividing by `h`.
 const MIN_CONE_COSINE: f64 = 1e-12;
+/// Points closer to the axis than this fraction of the pill's scale are treated as on the axis.
+const AXIS_EPS: f64 = 1e-12;
 
 /// The shape of a pill after classifying its degenerate cases once per pose.
 #[derive(Copy, Clone, Debug, PartialEq)]
@@ -132,8 +134,11 @@ impl PillFrame {
                     self.cap(p, 1, &axis)
                 } else {
                     let t = a / len;
-                    let out = if y > 0.0 {
-                        radial / y
+                    // Within rounding of the axis the radial direction is noise (and not
+                    // orthogonal to the axis); every direction is equally close there.
+                    let out = if y > AXIS_EPS * (w.norm() + len) {
+                        let o = radial - axis * axis.dot(&radial);
+                        o / o.norm()
                     } else {
                         any_orthogonal(&axis)
                     };

@@ -39,6 +39,8 @@ pub(crate) struct TangentPlanes {
     pub(crate) gradient: Vector3<f64>,
     /// `h = √(1 − ‖g‖²) = |m·n±|`.
     pub(crate) cosine: f64,
+    /// `1/h`, the skewed travel per unit of distance from the center plane.
+    pub(crate) inv_cosine: f64,
     /// Outward unit normals: `[n₊, n₋] = [−g + h m, −g − h m]`.
     pub(crate) normals: [Vector3<f64>; 2],
     /// Dual basis of the edges `e₁ = c₁ − c₀`, `e₂ = c₂ − c₀` in the plane: `λᵢ(x) = bᵢ·(x − c₀)`.
@@ -55,9 +57,18 @@ pub(crate) struct WedgeFrame {
     pub(crate) planes: Option<TangentPlanes>,
     /// Edge pills, edge `i` opposite vertex `i` (see [`EDGE_VERTICES`]).
     pub(crate) edges: [PillFrame; 3],
-    /// Unit normal of the center triangle when it is not degenerate (also without tangent
-    /// planes), for the slab lower bound `|m·(p − c₀)| − max r`.
-    pub(crate) slab_normal: Option<Vector3<f64>>,
+    /// The wedge lies in the slab `|m·(x − c₀)| ≤ max rᵢ` around its center triangle (normal
+    /// `m`); `None` for degenerate triangles. A cheap lower bound that culls wedges the
+    /// bounding-ball test lets through (points above or below a flat palm wedge).
+    pub(crate) slab: Option<Slab>,
+}
+
+/// A slab `|m·x − offset| ≤ half_width` containing a wedge.
+#[derive(Copy, Clone, Debug, PartialEq)]
+pub(crate) struct Slab {
+    pub(crate) m: Vector3<f64>,
+    pub(crate) offset: f64,
+    pub(crate) half_width: f64,
 }
 
 /// Barycentric coordinates and skewed travel of a point's planar candidate.
@@ -89,10 +100,14 @@ impl WedgeFrame {
         let area2 = cross.norm();
         let (l1, l2) = (e1.norm(), e2.norm());
         let mut planes = None;
-        let mut slab_normal = None;
+        let mut slab = None;
         if area2 > MIN_SINE * l1 * l2 && area2 > 0.0 {
             let m = cross / area2;
-            slab_normal = Some(m);
+            slab = Some(Slab {
+                m,
+                offset: m.dot(&centers[0]),
+                half_width: radii[0].max(radii[1]).max(radii[2]),
+            });
             // Dual basis from the Gram matrix G = [e₁·e₁ e₁·e₂; e₁·e₂ e₂·e₂], det G = ‖e₁×e₂‖².
             let (g11, g12, g22) = (e1.dot(&e1), e1.dot(&e2), e2.dot(&e2));
             let det = area2 * area2;
@@ -109,6 +124,7 @@ impl WedgeFrame {
                         m,
                         gradient,
                         cosine,
+                        inv_cosine: 1.0 / cosine,
                         normals: [plus, minus],
                         dual: [b1, b2],
                         dual_dot_normal: [-b1.dot(&gradient), -b2.dot(&gradient)],
@@ -121,7 +137,7 @@ impl WedgeFrame {
             radii,
             planes,
             edges,
-            slab_normal,
+            slab,
         }
     }
 
@@ -132,9 +148,9 @@ impl WedgeFrame {
         let w = p - c0;
         let delta = tp.m.dot(&w);
         let mu = if side == 0 {
-            delta / tp.cosine
+            delta * tp.inv_cosine
         } else {
-            -delta / tp.cosine
+            -delta * tp.inv_cosine
         };
         let l1 = tp.dual[0].dot(&w) - mu * tp.dual_dot_normal[0];
         let l2 = tp.dual[1].dot(&w) - mu * tp.dual_dot_normal[1];
@@ -158,6 +174,19 @@ impl WedgeFrame {
     #[inline]
     pub(crate) fn planar_radius(&self, lambda: &[f64; 3]) -> f64 {
         self.radii[0] * lambda[0] + self.radii[1] * lambda[1] + self.radii[2] * lambda[2]
+    }
+
+    /// [`distance`](Self::distance) when it is below `best`; otherwise some value `≥ best`
+    /// (the slab bound), without evaluating the wedge.
+    #[inline]
+    pub(crate) fn distance_below(&self, p: &Vector3<f64>, best: f64) -> f64 {
+        if let Some(slab) = &self.slab {
+            let bound = (slab.m.dot(p) - slab.offset).abs() - slab.half_width;
+            if bound >= best {
+                return bound;
+            }
+        }
+        self.distance(p)
     }
 
     /// Signed distance from `p` to the wedge surface (negative inside), without the footpoint.
