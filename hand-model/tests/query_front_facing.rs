@@ -40,11 +40,9 @@ fn check_front_facing(g: &SphereMeshGeometry, p: &Vector3<f64>, view: &View, pr:
     }
     let v = view.direction_to(&pr.point).unwrap();
     let dist = (p - pr.point).norm();
-    let slack = match view {
-        View::Orthographic(_) => 1e-9,
-        // The silhouette is computed for the orthographic view along the ray through p.
-        View::Perspective { camera_center } => 1e-9 + dist / (pr.point - camera_center).norm(),
-    };
+    // The silhouette is computed for one orthographic direction; under perspective the rays to
+    // other points deviate from it by |v − v_sil|.
+    let slack = 1e-9 + (v - g.silhouette_direction(view).unwrap()).norm();
     assert!(pr.normal.dot(&v) <= slack, "back-facing answer {pr:?}");
     if pr.part == Part::Silhouette {
         assert!(pr.normal.dot(&v).abs() <= slack, "silhouette normal not ⟂ view: {pr:?}");

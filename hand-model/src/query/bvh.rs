@@ -89,6 +89,14 @@ impl ElementTree {
         }
     }
 
+    /// The ball containing the whole model (the root's), `None` for an empty tree.
+    pub(crate) fn root_ball(&self) -> Option<BoundingBall> {
+        self.nodes.last().map(|n| BoundingBall {
+            center: n.center,
+            radius: n.radius,
+        })
+    }
+
     /// Greedy descent to one leaf, always into the child with the smaller power
     /// `‖p − C‖² − R²`: a cheap guess of the element nearest to `p`. `None` for an empty tree.
     #[inline]

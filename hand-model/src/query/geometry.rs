@@ -118,7 +118,7 @@ pub struct SphereMeshGeometry {
     /// The bounding balls again as packed `[x, y, z, R]`, for the culling loop.
     pub(super) packed: Vec<[f64; 4]>,
     /// Bounding-ball hierarchy over the elements, for a first guess of the nearest element.
-    tree: ElementTree,
+    pub(super) tree: ElementTree,
 }
 
 impl SphereMeshGeometry {

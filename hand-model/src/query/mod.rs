@@ -20,7 +20,6 @@
 //! # Non-finite input
 //! Queries with a non-finite point return `None`; nothing in this module panics on finite input.
 
-mod bounded_heap;
 mod bounding;
 mod bvh;
 mod front_facing;
@@ -29,6 +28,7 @@ mod implicit;
 mod point_pill;
 mod point_wedge;
 mod silhouette;
+mod union_silhouette;
 mod view;
 
 pub use self::bounding::BoundingBall;
