@@ -49,6 +49,8 @@ fn model_projection_equals_brute_force_over_elements() {
         let pr = g.project(&p).unwrap();
         let brute = brute_over_elements(&g, &p);
         assert_eq!(pr.distance, brute.distance, "p = {p:?}");
+        // Ties go to the lower element index, as for the brute force's first minimum.
+        assert_eq!(pr.element, brute.element, "p = {p:?}");
         assert_eq!(g.phi(&p), Some(pr.distance));
         check_projection(&pr, &p, &spheres);
         // The footpoint lies on the surface of its element.
@@ -64,7 +66,9 @@ fn model_projection_of_random_meshes_equals_brute_force() {
     // Random meshes, also beyond the stack buffer of lower bounds (> 64 elements).
     let mut rng = rng(2);
     for n_elements in [1, 2, 5, 30, 80] {
-        let spheres: Vec<Sphere> = (0..40).map(|_| random_sphere(&mut rng, 60.0, 12.0)).collect();
+        let spheres: Vec<Sphere> = (0..40)
+            .map(|_| random_sphere(&mut rng, 60.0, 12.0))
+            .collect();
         let elements: Vec<Element> = (0..n_elements)
             .map(|_| {
                 let ids: [u32; 3] = std::array::from_fn(|_| rng.random_range(0..40u32));
@@ -90,7 +94,12 @@ fn update_reposes_without_changing_topology() {
     let mut rng = rng(4);
     let moved: Vec<Sphere> = spheres
         .iter()
-        .map(|s| Sphere::new(s.center + random_vector(&mut rng, 5.0), s.radius * rng.random_range(0.8..1.2)))
+        .map(|s| {
+            Sphere::new(
+                s.center + random_vector(&mut rng, 5.0),
+                s.radius * rng.random_range(0.8..1.2),
+            )
+        })
         .collect();
     g.update(&moved).unwrap();
     let fresh = SphereMeshGeometry::new(&moved, &elements).unwrap();
@@ -100,23 +109,39 @@ fn update_reposes_without_changing_topology() {
     }
     assert_eq!(
         g.update(&moved[1..]),
-        Err(GeometryError::SphereCountMismatch { expected: 38, got: 37 })
+        Err(GeometryError::SphereCountMismatch {
+            expected: 38,
+            got: 37
+        })
     );
     let mut bad = moved.clone();
     bad[3].radius = -1.0;
-    assert_eq!(g.update(&bad), Err(GeometryError::InvalidSphere { index: 3 }));
+    assert_eq!(
+        g.update(&bad),
+        Err(GeometryError::InvalidSphere { index: 3 })
+    );
     bad[3].radius = f64::NAN;
-    assert_eq!(g.update(&bad), Err(GeometryError::InvalidSphere { index: 3 }));
+    assert_eq!(
+        g.update(&bad),
+        Err(GeometryError::InvalidSphere { index: 3 })
+    );
     // A failed update leaves the geometry as it was.
     assert_eq!(g.spheres(), &moved[..]);
 }
 
 #[test]
 fn construction_errors() {
-    let s = [Sphere::new(Vector3::zeros(), 1.0), Sphere::new(Vector3::x(), 1.0)];
+    let s = [
+        Sphere::new(Vector3::zeros(), 1.0),
+        Sphere::new(Vector3::x(), 1.0),
+    ];
     assert_eq!(
         SphereMeshGeometry::new(&s, &[Element::Wedge([0, 1, 2])]).unwrap_err(),
-        GeometryError::SphereIndexOutOfRange { element: 0, sphere: 2, count: 2 }
+        GeometryError::SphereIndexOutOfRange {
+            element: 0,
+            sphere: 2,
+            count: 2
+        }
     );
     let empty = SphereMeshGeometry::new(&s, &[]).unwrap();
     assert!(empty.project(&Vector3::zeros()).is_none());
@@ -163,4 +188,43 @@ fn phi_sign_matches_inside_outside() {
             assert!((p - b.center).norm() - b.radius <= g.phi_element(e, &p).unwrap() + 1e-12);
         }
     }
+}
+
+#[test]
+fn extreme_accepted_magnitudes_never_give_nan() {
+    use hand_model::query::{View, MAX_COORDINATE};
+    let (spheres, elements, _) = hand();
+    let mut rng = rng(9);
+    for scale in [1e-40, 1e-12, 1e12, 1e40, MAX_COORDINATE / 500.0] {
+        let scaled: Vec<Sphere> = spheres
+            .iter()
+            .map(|s| Sphere::new(s.center * scale, s.radius * scale))
+            .collect();
+        let g = SphereMeshGeometry::new(&scaled, &elements).unwrap();
+        let view = View::Perspective {
+            camera_center: Vector3::new(0.0, 50.0, -400.0) * scale,
+        };
+        for _ in 0..300 {
+            let p = random_vector(&mut rng, 200.0) * scale;
+            for pr in [g.project(&p), g.project_front_facing(&p, &view)] {
+                let pr = pr.expect("accepted input");
+                let v = [
+                    pr.point.x,
+                    pr.point.y,
+                    pr.point.z,
+                    pr.normal.norm(),
+                    pr.distance,
+                    pr.weights[1],
+                ];
+                assert!(v.iter().all(|x| x.is_finite()), "scale {scale}: {pr:?}");
+            }
+        }
+    }
+    let g = SphereMeshGeometry::new(&spheres, &elements).unwrap();
+    assert!(g
+        .project(&Vector3::new(2.0 * MAX_COORDINATE, 0.0, 0.0))
+        .is_none());
+    let mut big = spheres.clone();
+    big[0].radius = 2.0 * MAX_COORDINATE;
+    assert!(SphereMeshGeometry::new(&big, &elements).is_err());
 }

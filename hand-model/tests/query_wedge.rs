@@ -13,15 +13,28 @@ fn check_wedge(p: &Vector3<f64>, s: [&Sphere; 3]) -> (f64, Part) {
     check_projection(&pr, p, &[*s[0], *s[1], *s[2]]);
     let scale = 1.0 + p.norm() + s.iter().map(|x| x.center.norm() + x.radius).sum::<f64>();
     let brute = brute_wedge(p, s);
-    assert!(pr.distance <= brute + 1e-9 * scale, "above brute force: {} vs {brute} ({:?})", pr.distance, pr.part);
-    assert!(pr.distance >= brute - 1e-7 * scale, "below brute force: {} vs {brute} ({:?})", pr.distance, pr.part);
+    assert!(
+        pr.distance <= brute + 1e-9 * scale,
+        "above brute force: {} vs {brute} ({:?})",
+        pr.distance,
+        pr.part
+    );
+    assert!(
+        pr.distance >= brute - 1e-7 * scale,
+        "below brute force: {} vs {brute} ({:?})",
+        pr.distance,
+        pr.part
+    );
     assert_eq!(phi_wedge(p, s), Some(pr.distance));
     let on_surface = phi_wedge(&pr.point, s).unwrap();
     assert!(on_surface.abs() < 1e-9 * scale, "phi(q) = {on_surface}");
     assert!(brute_wedge(&pr.point, s).abs() < 1e-7 * scale);
     let qs = pr.point - pr.skeleton_point;
     if qs.norm() > 1e-6 {
-        assert!((qs.normalize() - pr.normal).norm() < 1e-9, "normal != (q - s)/|q - s|");
+        assert!(
+            (qs.normalize() - pr.normal).norm() < 1e-9,
+            "normal != (q - s)/|q - s|"
+        );
     }
     assert!((p - pr.point - pr.normal * pr.distance).norm() < 1e-8 * scale);
     (pr.distance, pr.part)
@@ -43,7 +56,11 @@ fn wedge_matches_brute_force() {
                 random_point_near(&mut rng, &[&s[0], &s[1], &s[2]], 10.0)
             } else {
                 let (l1, l2): (f64, f64) = (rng.random(), rng.random());
-                let (l1, l2) = if l1 + l2 > 1.0 { (1.0 - l1, 1.0 - l2) } else { (l1, l2) };
+                let (l1, l2) = if l1 + l2 > 1.0 {
+                    (1.0 - l1, 1.0 - l2)
+                } else {
+                    (l1, l2)
+                };
                 let l0 = 1.0 - l1 - l2;
                 let c = s[0].center * l0 + s[1].center * l1 + s[2].center * l2;
                 let r = s[0].radius * l0 + s[1].radius * l1 + s[2].radius * l2;
@@ -62,8 +79,14 @@ fn wedge_matches_brute_force() {
             }
         }
     }
-    assert!(parts.iter().all(|&n| n > 100), "part counts (sphere, cone, plane): {parts:?}");
-    assert!(inside > 200 && outside > 200, "inside {inside}, outside {outside}");
+    assert!(
+        parts.iter().all(|&n| n > 100),
+        "part counts (sphere, cone, plane): {parts:?}"
+    );
+    assert!(
+        inside > 200 && outside > 200,
+        "inside {inside}, outside {outside}"
+    );
 }
 
 #[test]
@@ -73,8 +96,15 @@ fn palm_like_wedges_match_brute_force() {
     for _ in 0..100 {
         let r = rng.random_range(5.0..12.0);
         let s = [0, 1, 2].map(|i| {
-            let c = Vector3::new(30.0 * (i as f64 - 1.0), if i == 1 { 40.0 } else { 0.0 }, 0.0);
-            Sphere::new(c + random_vector(&mut rng, 3.0), r + rng.random_range(-3.0..3.0))
+            let c = Vector3::new(
+                30.0 * (i as f64 - 1.0),
+                if i == 1 { 40.0 } else { 0.0 },
+                0.0,
+            );
+            Sphere::new(
+                c + random_vector(&mut rng, 3.0),
+                r + rng.random_range(-3.0..3.0),
+            )
         });
         for _ in 0..10 {
             let p = random_point_near(&mut rng, &[&s[0], &s[1], &s[2]], 10.0);
@@ -98,7 +128,11 @@ fn degenerate_wedges_never_give_nan() {
         [sp(o, 3.0), sp(o + x * 10.0, 2.0), sp(o + x * 5.0, 1.0)],
         [sp(o, 3.0), sp(o + x * 10.0, 2.0), sp(o + x * 15.0, 4.0)],
         // Nearly collinear.
-        [sp(o, 3.0), sp(o + x * 10.0, 2.0), sp(o + x * 5.0 + y * 1e-9, 4.0)],
+        [
+            sp(o, 3.0),
+            sp(o + x * 10.0, 2.0),
+            sp(o + x * 5.0 + y * 1e-9, 4.0),
+        ],
         // One sphere swallowed by another.
         [sp(o, 9.0), sp(o + x * 3.0, 2.0), sp(o + y * 20.0, 3.0)],
         [sp(o, 9.0), sp(o + x * 7.0, 2.0), sp(o + y * 20.0, 3.0)],
@@ -115,7 +149,12 @@ fn degenerate_wedges_never_give_nan() {
     ];
     for s in &cases {
         let refs = [&s[0], &s[1], &s[2]];
-        let mut points = vec![s[0].center, s[1].center, s[2].center, (s[0].center + s[1].center + s[2].center) / 3.0];
+        let mut points = vec![
+            s[0].center,
+            s[1].center,
+            s[2].center,
+            (s[0].center + s[1].center + s[2].center) / 3.0,
+        ];
         for _ in 0..100 {
             points.push(random_point_near(&mut rng, &refs, 5.0));
         }
@@ -124,14 +163,22 @@ fn degenerate_wedges_never_give_nan() {
             check_projection(&pr, p, s);
             let scale = 1.0 + p.norm() + s.iter().map(|x| x.center.norm() + x.radius).sum::<f64>();
             let brute = brute_wedge(p, refs);
-            assert!((pr.distance - brute).abs() < 1e-7 * scale, "{s:?} {p:?}: {} vs {brute}", pr.distance);
+            assert!(
+                (pr.distance - brute).abs() < 1e-7 * scale,
+                "{s:?} {p:?}: {} vs {brute}",
+                pr.distance
+            );
         }
     }
 }
 
 #[test]
 fn non_finite_input_is_rejected() {
-    let s = [Sphere::new(Vector3::zeros(), 1.0), Sphere::new(Vector3::x(), 1.0), Sphere::new(Vector3::y(), 1.0)];
+    let s = [
+        Sphere::new(Vector3::zeros(), 1.0),
+        Sphere::new(Vector3::x(), 1.0),
+        Sphere::new(Vector3::y(), 1.0),
+    ];
     let refs = [&s[0], &s[1], &s[2]];
     assert!(project_point_wedge(&Vector3::new(f64::NAN, 0.0, 0.0), refs).is_none());
     assert!(phi_wedge(&Vector3::new(0.0, f64::NEG_INFINITY, 0.0), refs).is_none());

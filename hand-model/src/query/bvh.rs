@@ -34,7 +34,9 @@ pub(crate) struct ElementTree {
 impl ElementTree {
     /// Builds the topology from the elements' current bounding balls and fits it.
     pub(crate) fn build(balls: &[BoundingBall]) -> Self {
-        let mut tree = Self { nodes: Vec::with_capacity(2 * balls.len()) };
+        let mut tree = Self {
+            nodes: Vec::with_capacity(2 * balls.len()),
+        };
         if !balls.is_empty() {
             let mut ids: Vec<u32> = (0..balls.len() as u32).collect();
             tree.split(balls, &mut ids);

@@ -6,7 +6,7 @@ use super::bounding::BoundingBall;
 use super::bvh::ElementTree;
 use super::point_pill::{valid_sphere, PillFrame};
 use super::point_wedge::WedgeFrame;
-use super::{is_finite, Projection};
+use super::{is_usable, Projection};
 use crate::shape::{Element, Sphere};
 use nalgebra::Vector3;
 
@@ -41,6 +41,11 @@ pub enum GeometryError {
 
 /// The per-pose data of one element.
 #[derive(Copy, Clone, Debug, PartialEq)]
+#[expect(
+    clippy::large_enum_variant,
+    reason = "frames sit inline in one Vec scanned by every query; boxing wedges would add a \
+              pointer chase per element visit"
+)]
 pub(crate) enum ElementFrame {
     Pill(PillFrame),
     Wedge(WedgeFrame),
@@ -55,7 +60,7 @@ impl ElementFrame {
         }
     }
 
-    /// The distance when it is below `best`, otherwise some value `≥ best`.
+    /// The distance when it is not above `best`, otherwise some value `> best`.
     #[inline]
     pub(crate) fn distance_below(&self, p: &Vector3<f64>, best: f64) -> f64 {
         match self {
@@ -90,7 +95,9 @@ impl ElementFrame {
         let s = |i: u32| &spheres[i as usize];
         match element {
             Element::Pill([a, b]) => ElementFrame::Pill(PillFrame::new(s(*a), s(*b))),
-            Element::Wedge([a, b, c]) => ElementFrame::Wedge(WedgeFrame::new([s(*a), s(*b), s(*c)])),
+            Element::Wedge([a, b, c]) => {
+                ElementFrame::Wedge(WedgeFrame::new([s(*a), s(*b), s(*c)]))
+            }
         }
     }
 
@@ -197,7 +204,7 @@ impl SphereMeshGeometry {
     /// (a lower bound of the depth in the union where elements overlap). `None` for a non-finite
     /// point or a model without elements.
     pub fn phi(&self, p: &Vector3<f64>) -> Option<f64> {
-        if !is_finite(p) {
+        if !is_usable(p) {
             return None;
         }
         self.nearest(p).map(|(_, d)| d)
@@ -206,7 +213,7 @@ impl SphereMeshGeometry {
     /// Signed distance from `p` to element `element` alone (`φ_e(p)`, Eq. 3.1 on one element).
     /// `None` for a non-finite point or an out-of-range index.
     pub fn phi_element(&self, element: usize, p: &Vector3<f64>) -> Option<f64> {
-        if !is_finite(p) {
+        if !is_usable(p) {
             return None;
         }
         self.frames.get(element).map(|f| f.distance(p))
@@ -215,7 +222,7 @@ impl SphereMeshGeometry {
     /// Closest-point projection on one element (Fig. 3.7), with global sphere indices.
     /// `None` for a non-finite point or an out-of-range index.
     pub fn project_on_element(&self, element: usize, p: &Vector3<f64>) -> Option<Projection> {
-        if !is_finite(p) {
+        if !is_usable(p) {
             return None;
         }
         let frame = self.frames.get(element)?;
@@ -230,7 +237,7 @@ impl SphereMeshGeometry {
     /// bound `‖p − C_e‖ − R_e` is below the best distance found so far. `None` for a non-finite point or a model without
     /// elements.
     pub fn project(&self, p: &Vector3<f64>) -> Option<Projection> {
-        if !is_finite(p) {
+        if !is_usable(p) {
             return None;
         }
         let (e, _) = self.nearest(p)?;
@@ -255,7 +262,7 @@ impl SphereMeshGeometry {
     /// (the merge test of the thesis's silhouette computation, §3.3.1). `false` for a
     /// non-finite `x`.
     pub fn is_buried(&self, x: &Vector3<f64>, tol: f64) -> bool {
-        is_finite(x) && self.burier(x, tol, 0).is_some()
+        is_usable(x) && self.burier(x, tol, 0).is_some()
     }
 
     /// The element burying `x` (`φ_e(x) < −tol`), trying `hint` first. Bounding balls cull the
@@ -293,9 +300,10 @@ impl SphereMeshGeometry {
             let (dx, dy, dz) = (p.x - x, p.y - y, p.z - z);
             let d2 = dx * dx + dy * dy + dz * dz;
             let t = best + radius;
-            if t > 0.0 && d2 < t * t && e != first {
+            if t > 0.0 && d2 <= t * t && e != first {
                 let d = frame.distance_below(p, best);
-                if d < best {
+                // Ties go to the lower index, so the answer does not depend on the first guess.
+                if d < best || (d == best && e < best_e) {
                     best = d;
                     best_e = e;
                 }

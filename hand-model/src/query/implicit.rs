@@ -8,16 +8,16 @@
 //! trackers need distances, so that is the form evaluated here. The model-wide function
 //! (Eq. 3.6) is [`super::SphereMeshGeometry::phi`].
 
+use super::is_usable;
 use super::point_pill::{valid_sphere, PillFrame};
 use super::point_wedge::WedgeFrame;
-use super::is_finite;
 use crate::shape::Sphere;
 use nalgebra::Vector3;
 
 /// Signed distance `φ_e(p)` from `p` to the pill `conv(a, b)` (Eq. 3.1 on a segment skeleton):
 /// negative inside, zero on the surface. `None` for non-finite input or a negative radius.
 pub fn phi_pill(p: &Vector3<f64>, a: &Sphere, b: &Sphere) -> Option<f64> {
-    if !is_finite(p) || !valid_sphere(a) || !valid_sphere(b) {
+    if !is_usable(p) || !valid_sphere(a) || !valid_sphere(b) {
         return None;
     }
     Some(PillFrame::new(a, b).distance(p))
@@ -27,7 +27,7 @@ pub fn phi_pill(p: &Vector3<f64>, a: &Sphere, b: &Sphere) -> Option<f64> {
 /// skeleton): negative inside, zero on the surface. `None` for non-finite input or a negative
 /// radius.
 pub fn phi_wedge(p: &Vector3<f64>, s: [&Sphere; 3]) -> Option<f64> {
-    if !is_finite(p) || !s.iter().all(|x| valid_sphere(x)) {
+    if !is_usable(p) || !s.iter().all(|x| valid_sphere(x)) {
         return None;
     }
     Some(WedgeFrame::new(s).distance(p))

@@ -18,7 +18,9 @@
 //! `n` fixed, so it has to hold bit for bit and not just up to rounding.
 //!
 //! # Non-finite input
-//! Queries with a non-finite point return `None`; nothing in this module panics on finite input.
+//! Queries with a non-finite point (or a coordinate beyond [`MAX_COORDINATE`]) return `None`;
+//! spheres must be finite with radii in `[0, MAX_COORDINATE]`. Nothing in this module panics or
+//! returns NaN for accepted input.
 
 mod bounding;
 mod bvh;
@@ -144,6 +146,11 @@ pub(crate) fn any_orthogonal(u: &Vector3<f64>) -> Vector3<f64> {
     }
 }
 
-fn is_finite(v: &Vector3<f64>) -> bool {
-    v.x.is_finite() && v.y.is_finite() && v.z.is_finite()
+/// Coordinates and radii beyond this magnitude are rejected like non-finite ones: every product
+/// the queries form (squared norms of cross products of differences) then stays finite, which is
+/// what guarantees NaN-free results. Hands are measured in millimetres, so this is no limit.
+pub const MAX_COORDINATE: f64 = 1e50;
+
+fn is_usable(v: &Vector3<f64>) -> bool {
+    v.iter().all(|x| x.is_finite() && x.abs() <= MAX_COORDINATE)
 }

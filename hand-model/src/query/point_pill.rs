@@ -11,7 +11,7 @@
 //! segment the footpoint is on the cone with signed distance `h y − k x − r₀`; outside it is on
 //! the nearer sphere cap.
 
-use super::{any_orthogonal, combine, is_finite, Part, Projection};
+use super::{any_orthogonal, combine, is_usable, Part, Projection};
 use crate::shape::Sphere;
 use nalgebra::Vector3;
 
@@ -201,14 +201,14 @@ impl PillFrame {
 /// centers, one sphere inside the other, zero radii) are handled. Returns `None` when `p` or a
 /// sphere is not finite or a radius is negative.
 pub fn project_point_pill(p: &Vector3<f64>, a: &Sphere, b: &Sphere) -> Option<Projection> {
-    if !is_finite(p) || !valid_sphere(a) || !valid_sphere(b) {
+    if !is_usable(p) || !valid_sphere(a) || !valid_sphere(b) {
         return None;
     }
     Some(PillFrame::new(a, b).project(p))
 }
 
 pub(crate) fn valid_sphere(s: &Sphere) -> bool {
-    is_finite(&s.center) && s.radius.is_finite() && s.radius >= 0.0
+    is_usable(&s.center) && (0.0..=super::MAX_COORDINATE).contains(&s.radius)
 }
 
 #[cfg(test)]

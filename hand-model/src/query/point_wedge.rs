@@ -15,7 +15,7 @@
 //! (a swallowed sphere, collinear centers) the minimum is on one of the three edge pills.
 
 use super::point_pill::{valid_sphere, PillFrame};
-use super::{combine, is_finite, Part, Projection};
+use super::{combine, is_usable, Part, Projection};
 use crate::shape::Sphere;
 use nalgebra::Vector3;
 
@@ -144,7 +144,12 @@ impl WedgeFrame {
     /// Skewed projection of `p` along the normal of plane `side` into the center triangle,
     /// `s = p − μ n` (μ may be negative when `p` is on the other side).
     #[inline]
-    pub(crate) fn planar_foot(tp: &TangentPlanes, c0: &Vector3<f64>, p: &Vector3<f64>, side: usize) -> PlanarFoot {
+    pub(crate) fn planar_foot(
+        tp: &TangentPlanes,
+        c0: &Vector3<f64>,
+        p: &Vector3<f64>,
+        side: usize,
+    ) -> PlanarFoot {
         let w = p - c0;
         let delta = tp.m.dot(&w);
         let mu = if side == 0 {
@@ -176,13 +181,13 @@ impl WedgeFrame {
         self.radii[0] * lambda[0] + self.radii[1] * lambda[1] + self.radii[2] * lambda[2]
     }
 
-    /// [`distance`](Self::distance) when it is below `best`; otherwise some value `≥ best`
+    /// [`distance`](Self::distance) when it is not above `best`; otherwise some value `> best`
     /// (the slab bound), without evaluating the wedge.
     #[inline]
     pub(crate) fn distance_below(&self, p: &Vector3<f64>, best: f64) -> f64 {
         if let Some(slab) = &self.slab {
             let bound = (slab.m.dot(p) - slab.offset).abs() - slab.half_width;
-            if bound >= best {
+            if bound > best {
                 return bound;
             }
         }
@@ -297,7 +302,7 @@ impl WedgeFrame {
 /// on every call; for repeated queries use [`super::SphereMeshGeometry`], which caches them per
 /// pose. Returns `None` when `p` or a sphere is not finite or a radius is negative.
 pub fn project_point_wedge(p: &Vector3<f64>, s: [&Sphere; 3]) -> Option<Projection> {
-    if !is_finite(p) || !s.iter().all(|x| valid_sphere(x)) {
+    if !is_usable(p) || !s.iter().all(|x| valid_sphere(x)) {
         return None;
     }
     Some(WedgeFrame::new(s).project(p))

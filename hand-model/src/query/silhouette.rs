@@ -96,7 +96,10 @@ impl Piece {
     pub(crate) fn speed(&self, centers: &[Vector3<f64>], radii: &[f64]) -> f64 {
         match *self {
             Piece::Arc { sphere, .. } => radii[sphere as usize],
-            Piece::Segment { spheres: [i, j], normal } => {
+            Piece::Segment {
+                spheres: [i, j],
+                normal,
+            } => {
                 let (i, j) = (i as usize, j as usize);
                 ((centers[j] + normal * radii[j]) - (centers[i] + normal * radii[i])).norm()
             }
@@ -110,7 +113,10 @@ impl Piece {
                 let c = centers[sphere as usize];
                 [c.x, c.y, c.z, radii[sphere as usize]]
             }
-            Piece::Segment { spheres: [i, j], normal } => {
+            Piece::Segment {
+                spheres: [i, j],
+                normal,
+            } => {
                 let (i, j) = (i as usize, j as usize);
                 let a = centers[i] + normal * radii[i];
                 let b = centers[j] + normal * radii[j];
@@ -150,13 +156,26 @@ impl Piece {
     /// The point at parameter `s`. Computed through [`combine`] so the projection identity
     /// `q = Σ w c + (Σ w r) n` holds exactly.
     #[inline]
-    pub(crate) fn at(&self, centers: &[Vector3<f64>], radii: &[f64], basis: &ViewBasis, s: f64) -> PiecePoint {
+    pub(crate) fn at(
+        &self,
+        centers: &[Vector3<f64>],
+        radii: &[f64],
+        basis: &ViewBasis,
+        s: f64,
+    ) -> PiecePoint {
         let (spheres, weights, normal) = match *self {
             Piece::Arc { sphere, .. } => {
                 let (sin, cos) = s.sin_cos();
-                ([sphere; 3], [1.0, 0.0, 0.0], basis.lift(&Vector2::new(cos, sin)))
+                (
+                    [sphere; 3],
+                    [1.0, 0.0, 0.0],
+                    basis.lift(&Vector2::new(cos, sin)),
+                )
             }
-            Piece::Segment { spheres: [i, j], normal } => ([i, j, i], [1.0 - s, s, 0.0], normal),
+            Piece::Segment {
+                spheres: [i, j],
+                normal,
+            } => ([i, j, i], [1.0 - s, s, 0.0], normal),
         };
         let (skeleton_point, _, point) = combine(
             spheres.map(|k| &centers[k as usize]),
@@ -304,7 +323,11 @@ fn active_arcs(flat: &[Vector2<f64>], radii: &[f64], i: usize) -> ([(f64, f64); 
     }
     let mut out = [(0.0, 0.0); 2];
     for (o, &(a, la)) in out.iter_mut().zip(&set[..count]) {
-        *o = if la >= TAU { (a - PI, a + PI) } else { (a, a + la) };
+        *o = if la >= TAU {
+            (a - PI, a + PI)
+        } else {
+            (a, a + la)
+        };
     }
     (out, count)
 }
@@ -315,7 +338,11 @@ mod tests {
 
     fn pieces(centers: &[Vector3<f64>], radii: &[f64]) -> Vec<Piece> {
         let basis = ViewBasis::new(Vector3::z());
-        let mut out = [Piece::Arc { sphere: 0, lo: 0.0, hi: 0.0 }; MAX_ELEMENT_PIECES];
+        let mut out = [Piece::Arc {
+            sphere: 0,
+            lo: 0.0,
+            hi: 0.0,
+        }; MAX_ELEMENT_PIECES];
         let n = element_pieces(centers, radii, &basis, &mut out);
         out[..n].to_vec()
     }
@@ -339,18 +366,28 @@ mod tests {
 
     #[test]
     fn pill_seen_along_its_axis_is_the_bigger_circle() {
-        let ps = pieces(&[Vector3::zeros(), Vector3::new(0.0, 0.0, 10.0)], &[3.0, 1.0]);
+        let ps = pieces(
+            &[Vector3::zeros(), Vector3::new(0.0, 0.0, 10.0)],
+            &[3.0, 1.0],
+        );
         assert_eq!(ps.len(), 1);
         assert!(matches!(ps[0], Piece::Arc { sphere: 0, .. }));
     }
 
     #[test]
     fn middle_circle_shows_on_both_sides() {
-        let flat = [Vector2::new(-20.0, 0.0), Vector2::new(0.0, 0.0), Vector2::new(20.0, 0.0)];
+        let flat = [
+            Vector2::new(-20.0, 0.0),
+            Vector2::new(0.0, 0.0),
+            Vector2::new(20.0, 0.0),
+        ];
         let (arcs, k) = active_arcs(&flat, &[1.0, 5.0, 1.0], 1);
         assert_eq!(k, 2);
         for (lo, hi) in &arcs[..k] {
-            assert!((0.5 * (lo + hi)).sin().abs() > 0.99, "arc around ±y: {lo} {hi}");
+            assert!(
+                (0.5 * (lo + hi)).sin().abs() > 0.99,
+                "arc around ±y: {lo} {hi}"
+            );
         }
         assert_eq!(active_arcs(&flat, &[1.0, 5.0, 1.0], 0).1, 1);
     }

@@ -9,7 +9,8 @@
 //! `speed`-Lipschitz (`φ_B` is 1-Lipschitz and `x(s)` moves at most `speed` per unit of `s`),
 //! so an adaptive subdivision classifies whole sub-ranges as visible (`g ≥ 0` everywhere) or
 //! buried from the values at their ends, and regula falsi pins each visible/buried boundary on
-//! the visible side. Features shorter than [`MIN_FEATURE`] are not resolved.
+//! the visible side. Features shorter than [`MIN_FEATURE`] (or 10⁻⁴ of the piece) are not
+//! resolved.
 //!
 //! Built once per batch of points (it depends on the pose and the view only) and kept on the
 //! stack: at most [`MAX_PIECES`] pieces with [`MAX_VISIBLE`] visible ranges each.
@@ -20,13 +21,21 @@ use super::silhouette::{
 };
 use nalgebra::{Vector2, Vector3};
 
-/// Contour pieces held (≈ 6 per element; the hand-like models have about 160).
-pub(crate) const MAX_PIECES: usize = 320;
+/// Contour pieces held (≈ 5 per element; a 30-element hand has about 150).
+pub(crate) const MAX_PIECES: usize = 256;
 /// Visible ranges kept per piece (further ones are dropped).
-pub(crate) const MAX_VISIBLE: usize = 4;
+pub(crate) const MAX_VISIBLE: usize = 3;
 /// Visible/buried boundaries are resolved down to pieces of this length (mm): a dip of a piece
 /// into another element narrower than this may be kept as visible.
 pub(crate) const MIN_FEATURE: f64 = 0.01;
+/// ... or of this fraction of the piece's length, whichever is longer, which bounds the
+/// subdivision depth (and work) at any model scale.
+const MIN_FEATURE_FRACTION: f64 = 1e-4;
+
+/// The resolution of the subdivision for a range of this length.
+fn resolution(length: f64) -> f64 {
+    MIN_FEATURE.max(MIN_FEATURE_FRACTION * length)
+}
 /// Elements whose pieces are indexed per element (larger models scan all pieces).
 const GROUPED_ELEMENTS: usize = 64;
 
@@ -183,12 +192,19 @@ impl Nearest<'_> {
                     let d = nearest_direction(spans, u);
                     Piece::arc_at_direction(sphere, centers, radii, &self.sil.basis, &d)
                 }
-                Piece::Segment { spheres: [i, j], normal } => {
+                Piece::Segment {
+                    spheres: [i, j],
+                    normal,
+                } => {
                     let (i, j) = (i as usize, j as usize);
                     let a = centers[i] + normal * radii[i];
                     let ab = centers[j] + normal * radii[j] - a;
                     let ab2 = ab.norm_squared();
-                    let foot = if ab2 > 0.0 { (p - a).dot(&ab) / ab2 } else { 0.0 };
+                    let foot = if ab2 > 0.0 {
+                        (p - a).dot(&ab) / ab2
+                    } else {
+                        0.0
+                    };
                     let mut t = foot;
                     let mut gap = f64::INFINITY;
                     for s in spans {
@@ -265,7 +281,10 @@ fn clip(g: &SphereMeshGeometry, own: usize, basis: &ViewBasis, tol: f64, vp: &mu
     let bound_center = Vector3::new(bx, by, bz);
     for (b, ball) in g.packed.iter().enumerate() {
         let reach = ball[3] + br;
-        if b == own || (bound_center - Vector3::new(ball[0], ball[1], ball[2])).norm_squared() >= reach * reach {
+        if b == own
+            || (bound_center - Vector3::new(ball[0], ball[1], ball[2])).norm_squared()
+                >= reach * reach
+        {
             continue;
         }
         let blocker = &g.frames[b];
@@ -282,14 +301,16 @@ fn clip(g: &SphereMeshGeometry, own: usize, basis: &ViewBasis, tol: f64, vp: &mu
                     continue;
                 }
             }
-            Piece::Segment { spheres: [i, j], normal } => {
+            Piece::Segment {
+                spheres: [i, j],
+                normal,
+            } => {
                 if let (Some(ki), Some(_)) = (local_in_b(i), local_in_b(j)) {
                     let (bc, br) = (blocker.centers(), blocker.radii());
                     let own_support = normal.dot(&bc[ki]) + br[ki];
-                    let supported = bc
-                        .iter()
-                        .zip(br)
-                        .all(|(c, r)| normal.dot(c) + r <= own_support + 1e-9 * (1.0 + own_support.abs()));
+                    let supported = bc.iter().zip(br).all(|(c, r)| {
+                        normal.dot(c) + r <= own_support + 1e-9 * (1.0 + own_support.abs())
+                    });
                     if !supported {
                         vis.clear();
                         break;
@@ -322,8 +343,17 @@ fn clip(g: &SphereMeshGeometry, own: usize, basis: &ViewBasis, tol: f64, vp: &mu
             Vector2::new(cos, sin)
         };
         *span = match piece {
-            Piece::Arc { .. } => Span { a, b, da: dir(a), db: dir(b) },
-            Piece::Segment { .. } => Span { a, b, ..Span::default() },
+            Piece::Arc { .. } => Span {
+                a,
+                b,
+                da: dir(a),
+                db: dir(b),
+            },
+            Piece::Segment { .. } => Span {
+                a,
+                b,
+                ..Span::default()
+            },
         };
     }
     vp.n_visible = n as u8;
@@ -343,13 +373,21 @@ fn buried_range_convex(f: &impl Fn(f64) -> f64, lo: f64, hi: f64, speed: f64, ou
     let Some((m, fm)) = inside else {
         return;
     };
-    let start = if flo < 0.0 { lo } else { crossing(f, m, fm, lo, flo) };
-    let end = if fhi < 0.0 { hi } else { crossing(f, m, fm, hi, fhi) };
+    let start = if flo < 0.0 {
+        lo
+    } else {
+        crossing(f, m, fm, lo, flo)
+    };
+    let end = if fhi < 0.0 {
+        hi
+    } else {
+        crossing(f, m, fm, hi, fhi)
+    };
     out.push(start, end);
 }
 
 /// A point of `[lo, hi]` where `f < 0`, given `f(lo), f(hi) ≥ 0` and `f` `speed`-Lipschitz, or
-/// `None` when the subdivision rules it out down to [`MIN_FEATURE`].
+/// `None` when the subdivision rules it out down to the resolution.
 fn negative_point(
     f: &impl Fn(f64) -> f64,
     lo: f64,
@@ -361,11 +399,12 @@ fn negative_point(
     let mut stack = [(0.0, 0.0, 0.0, 0.0); 64];
     stack[0] = (lo, flo, hi, fhi);
     let mut len = 1;
+    let min = resolution(speed * (hi - lo));
     while len > 0 {
         len -= 1;
         let (a, fa, b, fb) = stack[len];
         let reach = speed * (b - a);
-        if fa + fb >= reach || reach <= MIN_FEATURE || len + 2 > stack.len() {
+        if fa + fb >= reach || reach <= min || len + 2 > stack.len() {
             continue;
         }
         let m = 0.5 * (a + b);
@@ -388,6 +427,7 @@ fn buried_ranges(f: &impl Fn(f64) -> f64, lo: f64, hi: f64, speed: f64, out: &mu
     let mut stack = [(0.0, 0.0, 0.0, 0.0); 64];
     stack[0] = (lo, f(lo), hi, f(hi));
     let mut len = 1;
+    let min = resolution(speed * (hi - lo));
     let mut open: Option<(f64, f64)> = None;
     let close = |open: &mut Option<(f64, f64)>, out: &mut Intervals| {
         if let Some((a, b)) = open.take() {
@@ -408,7 +448,7 @@ fn buried_ranges(f: &impl Fn(f64) -> f64, lo: f64, hi: f64, speed: f64, out: &mu
             close(&mut open, out);
         } else if fa < 0.0 && fb < 0.0 && -(fa + fb) >= reach {
             bury(a, b, &mut open);
-        } else if reach <= MIN_FEATURE || len + 2 > stack.len() {
+        } else if reach <= min || len + 2 > stack.len() {
             match (fa >= 0.0, fb >= 0.0) {
                 (true, true) => close(&mut open, out),
                 (false, false) => bury(a, b, &mut open),
@@ -435,7 +475,9 @@ fn buried_ranges(f: &impl Fn(f64) -> f64, lo: f64, hi: f64, speed: f64, out: &mu
             stack[len] = (c, fc, b, fb);
             stack[len + 1] = (a, fa, c, fc);
             len += 2;
-            if (c - a).abs() <= f64::EPSILON * (1.0 + a.abs()) || (b - c).abs() <= f64::EPSILON * (1.0 + b.abs()) {
+            if (c - a).abs() <= f64::EPSILON * (1.0 + a.abs())
+                || (b - c).abs() <= f64::EPSILON * (1.0 + b.abs())
+            {
                 // Degenerate split: fall back to bisection next time round.
                 len -= 2;
                 let m = 0.5 * (a + b);
@@ -576,4 +618,38 @@ pub(crate) fn crossing(
         }
     }
     outside
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn stack_footprint_stays_moderate() {
+        assert!(core::mem::size_of::<UnionSilhouette>() < 64 * 1024);
+    }
+
+    #[test]
+    fn intervals_subtract_and_intersect() {
+        let mut s = Intervals::new(0.0, 10.0);
+        s.subtract(2.0, 3.0);
+        s.subtract(5.0, 12.0);
+        assert_eq!(s.as_slice(), &[(0.0, 2.0), (3.0, 5.0)]);
+        let tau = core::f64::consts::TAU;
+        let mut a = Intervals::new(-1.0, 1.0);
+        a.intersect_circular(&[(0.5 + tau, 2.0 + tau)]);
+        assert_eq!(a.as_slice().len(), 1);
+        assert!((a.as_slice()[0].0 - 0.5).abs() < 1e-12 && (a.as_slice()[0].1 - 1.0).abs() < 1e-12);
+    }
+
+    #[test]
+    fn convex_buried_range_is_found() {
+        // f(t) = |t − 0.5| − 0.2: buried on (0.3, 0.7).
+        let f = |t: f64| (t - 0.5f64).abs() - 0.2;
+        let mut out = Intervals::empty();
+        buried_range_convex(&f, 0.0, 1.0, 1.0, &mut out);
+        let (a, b) = out.as_slice()[0];
+        assert!((a - 0.3).abs() < 1e-9 && (b - 0.7).abs() < 1e-9, "{a} {b}");
+        assert!(f(a) >= 0.0 && f(b) >= 0.0);
+    }
 }

@@ -1,7 +1,7 @@
 //! The camera a monocular front-facing query looks from (thesis §3.3.1 "Monocular
 //! Correspondences").
 
-use super::is_finite;
+use super::is_usable;
 use nalgebra::Vector3;
 
 /// How the sensor views the model, in the frame of the model's spheres.
@@ -31,7 +31,7 @@ impl View {
             View::Perspective { camera_center } => x - camera_center,
         };
         let len = d.norm();
-        (len > 0.0 && len.is_finite() && is_finite(&d)).then(|| d / len)
+        (len > 0.0 && len.is_finite() && is_usable(&d)).then(|| d / len)
     }
 
     /// Whether a surface point `x` with outward normal `n` faces away from the camera (`n·v ≥ 0`).
@@ -45,8 +45,8 @@ impl View {
 
     pub(crate) fn is_valid(&self) -> bool {
         match self {
-            View::Orthographic(d) => is_finite(d) && d.norm_squared() > 0.0,
-            View::Perspective { camera_center } => is_finite(camera_center),
+            View::Orthographic(d) => is_usable(d) && d.norm_squared() > 0.0,
+            View::Perspective { camera_center } => is_usable(camera_center),
         }
     }
 }

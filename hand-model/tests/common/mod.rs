@@ -111,15 +111,41 @@ pub fn brute_wedge(p: &Vector3<f64>, s: [&Sphere; 3]) -> f64 {
 /// weights forming a convex combination, and the exact identity q = Σ w c + (Σ w r) n.
 pub fn check_projection(pr: &Projection, p: &Vector3<f64>, spheres: &[Sphere]) {
     let all = [
-        pr.point.x, pr.point.y, pr.point.z, pr.normal.x, pr.normal.y, pr.normal.z,
-        pr.skeleton_point.x, pr.skeleton_point.y, pr.skeleton_point.z, pr.distance,
-        pr.weights[0], pr.weights[1], pr.weights[2],
+        pr.point.x,
+        pr.point.y,
+        pr.point.z,
+        pr.normal.x,
+        pr.normal.y,
+        pr.normal.z,
+        pr.skeleton_point.x,
+        pr.skeleton_point.y,
+        pr.skeleton_point.z,
+        pr.distance,
+        pr.weights[0],
+        pr.weights[1],
+        pr.weights[2],
     ];
-    assert!(all.iter().all(|x| x.is_finite()), "non-finite field in {pr:?}");
-    assert!((pr.normal.norm() - 1.0).abs() < 1e-9, "normal not unit: {pr:?}");
-    assert!(pr.weights.iter().all(|w| *w >= -1e-12), "negative weight: {pr:?}");
-    assert!((pr.weights.iter().sum::<f64>() - 1.0).abs() < 1e-9, "weights: {pr:?}");
-    assert_eq!(pr.reevaluate(spheres), Some(pr.point), "identity q = Σwc + (Σwr)n");
+    assert!(
+        all.iter().all(|x| x.is_finite()),
+        "non-finite field in {pr:?}"
+    );
+    assert!(
+        (pr.normal.norm() - 1.0).abs() < 1e-9,
+        "normal not unit: {pr:?}"
+    );
+    assert!(
+        pr.weights.iter().all(|w| *w >= -1e-12),
+        "negative weight: {pr:?}"
+    );
+    assert!(
+        (pr.weights.iter().sum::<f64>() - 1.0).abs() < 1e-9,
+        "weights: {pr:?}"
+    );
+    assert_eq!(
+        pr.reevaluate(spheres),
+        Some(pr.point),
+        "identity q = Σwc + (Σwr)n"
+    );
     let scale = 1.0 + p.norm();
     assert!(
         ((p - pr.point).norm() - pr.distance.abs()).abs() < 1e-9 * scale,
@@ -141,7 +167,11 @@ pub fn fibonacci_directions(n: usize) -> Vec<Vector3<f64>> {
 }
 
 fn orthonormal(u: &Vector3<f64>) -> (Vector3<f64>, Vector3<f64>) {
-    let h = if u.x.abs() < 0.6 { Vector3::x() } else { Vector3::y() };
+    let h = if u.x.abs() < 0.6 {
+        Vector3::x()
+    } else {
+        Vector3::y()
+    };
     let a = u.cross(&h).normalize();
     (a, u.cross(&a))
 }
@@ -150,10 +180,17 @@ fn orthonormal(u: &Vector3<f64>) -> (Vector3<f64>, Vector3<f64>) {
 /// generated from the support function alone: the boundary point with normal n is cᵢ + rᵢn for
 /// the sphere with the largest n·cᵢ + rᵢ, a generator segment on a tie of two spheres, the
 /// tangent triangle on a tie of three.
-pub fn sample_hull_surface(spheres: &[Sphere], density: usize) -> Vec<(Vector3<f64>, Vector3<f64>)> {
+pub fn sample_hull_surface(
+    spheres: &[Sphere],
+    density: usize,
+) -> Vec<(Vector3<f64>, Vector3<f64>)> {
     let mut out = Vec::new();
     let support = |n: &Vector3<f64>, i: usize| n.dot(&spheres[i].center) + spheres[i].radius;
-    let max_support = |n: &Vector3<f64>| (0..spheres.len()).map(|i| support(n, i)).fold(f64::NEG_INFINITY, f64::max);
+    let max_support = |n: &Vector3<f64>| {
+        (0..spheres.len())
+            .map(|i| support(n, i))
+            .fold(f64::NEG_INFINITY, f64::max)
+    };
     for n in fibonacci_directions(density * density) {
         let m = max_support(&n);
         for (i, s) in spheres.iter().enumerate() {
@@ -200,7 +237,10 @@ pub fn sample_hull_surface(spheres: &[Sphere], density: usize) -> Vec<(Vector3<f
             let m = m.normalize();
             // n·e1 = r0 − r1, n·e2 = r0 − r2: in-plane part from the 2×2 Gram system.
             let (g11, g12, g22) = (e1.dot(&e1), e1.dot(&e2), e2.dot(&e2));
-            let (y1, y2) = (spheres[0].radius - spheres[1].radius, spheres[0].radius - spheres[2].radius);
+            let (y1, y2) = (
+                spheres[0].radius - spheres[1].radius,
+                spheres[0].radius - spheres[2].radius,
+            );
             let det = g11 * g22 - g12 * g12;
             let a1 = (y1 * g22 - y2 * g12) / det;
             let a2 = (y2 * g11 - y1 * g12) / det;
@@ -214,8 +254,12 @@ pub fn sample_hull_surface(spheres: &[Sphere], density: usize) -> Vec<(Vector3<f
                             let l1 = a as f64 / density as f64;
                             let l2 = b as f64 / density as f64;
                             let l0 = 1.0 - l1 - l2;
-                            let c = spheres[0].center * l0 + spheres[1].center * l1 + spheres[2].center * l2;
-                            let r = spheres[0].radius * l0 + spheres[1].radius * l1 + spheres[2].radius * l2;
+                            let c = spheres[0].center * l0
+                                + spheres[1].center * l1
+                                + spheres[2].center * l2;
+                            let r = spheres[0].radius * l0
+                                + spheres[1].radius * l1
+                                + spheres[2].radius * l2;
                             out.push((c + n * r, n));
                         }
                     }
