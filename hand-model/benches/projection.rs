@@ -25,7 +25,10 @@ fn points_near(spheres: &[Sphere], elements: &[Element], n: usize, seed: u64) ->
         .map(|_| {
             let el = &elements[rng.random_range(0..elements.len())];
             let ids = el.spheres();
-            let mut w: Vec<f64> = ids.iter().map(|_| -rng.random::<f64>().max(1e-12).ln()).collect();
+            let mut w: Vec<f64> = ids
+                .iter()
+                .map(|_| -rng.random::<f64>().max(1e-12).ln())
+                .collect();
             let sum: f64 = w.iter().sum();
             w.iter_mut().for_each(|x| *x /= sum);
             let mut c = Vector3::zeros();
@@ -77,11 +80,17 @@ fn bench_projection(c: &mut Criterion) {
         b.iter(|| geometry.project_points(black_box(&points), black_box(&mut out)))
     });
     group.bench_function("front_facing_orthographic", |b| {
-        b.iter(|| geometry.project_points_front_facing(black_box(&points), &ortho, black_box(&mut out)))
+        b.iter(|| {
+            geometry.project_points_front_facing(black_box(&points), &ortho, black_box(&mut out))
+        })
     });
     group.bench_function("front_facing_perspective", |b| {
         b.iter(|| {
-            geometry.project_points_front_facing(black_box(&points), &perspective, black_box(&mut out))
+            geometry.project_points_front_facing(
+                black_box(&points),
+                &perspective,
+                black_box(&mut out),
+            )
         })
     });
     group.bench_function("update_pose", |b| {

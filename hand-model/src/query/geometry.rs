@@ -296,16 +296,35 @@ impl SphereMeshGeometry {
         let first = self.tree.guess(p)?;
         let mut best = self.frames[first].distance(p);
         let mut best_e = first;
-        for (e, (&[x, y, z, radius], frame)) in self.packed.iter().zip(&self.frames).enumerate() {
-            let (dx, dy, dz) = (p.x - x, p.y - y, p.z - z);
-            let d2 = dx * dx + dy * dy + dz * dz;
-            let t = best + radius;
-            if t > 0.0 && d2 <= t * t && e != first {
-                let d = frame.distance_below(p, best);
+        let (px, py, pz) = (p.x, p.y, p.z);
+        let survives = |b: &[f64; 4], best: f64| {
+            let (dx, dy, dz) = (px - b[0], py - b[1], pz - b[2]);
+            let t = best + b[3];
+            t > 0.0 && dx * dx + dy * dy + dz * dz <= t * t
+        };
+        let visit = |e: usize, best: &mut f64, best_e: &mut usize| {
+            if let Some(frame) = self.frames.get(e) {
+                let d = frame.distance_below(p, *best);
                 // Ties go to the lower index, so the answer does not depend on the first guess.
-                if d < best || (d == best && e < best_e) {
-                    best = d;
-                    best_e = e;
+                if d < *best || (d == *best && e < *best_e) {
+                    *best = d;
+                    *best_e = e;
+                }
+            }
+        };
+        for (chunk, balls) in self.packed.chunks(64).enumerate() {
+            // Branch-free pass against the guess's distance, then the survivors in order,
+            // re-tested against the improving best.
+            let mut mask = 0u64;
+            for (k, b) in balls.iter().enumerate() {
+                mask |= u64::from(survives(b, best)) << k;
+            }
+            while mask != 0 {
+                let k = mask.trailing_zeros() as usize;
+                mask &= mask - 1;
+                let e = chunk * 64 + k;
+                if e != first && survives(&balls[k], best) {
+                    visit(e, &mut best, &mut best_e);
                 }
             }
         }
