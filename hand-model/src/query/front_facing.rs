@@ -47,8 +47,11 @@ use nalgebra::Vector3;
 /// on an element's own surface evaluate to about ±1e-12 there.
 pub const BURIED_TOLERANCE: f64 = 1e-6;
 
-/// Outer iterations (Newton onto the crease, then a step along it) of the crease search.
+/// Outer iterations (two Newton steps onto the crease, then a step along it) of the crease
+/// search.
 const CREASE_ITERATIONS: usize = 6;
+/// Buried candidates kept per query for crease searches.
+const MAX_CREASE_SEARCHES: usize = 16;
 
 impl SphereMeshGeometry {
     /// Front-facing closest-point correspondence for a monocular view (thesis §3.3.1, Fig. 3.9):
@@ -137,21 +140,23 @@ impl SphereMeshGeometry {
         p: &Vector3<f64>,
     ) -> Option<Projection> {
         let (fa, fb) = (&self.frames[a], &self.frames[b]);
+        // One Newton step onto both surfaces; returns the crease tangent there.
+        let newton = |y: &mut Vector3<f64>| -> Option<Vector3<f64>> {
+            let (pa, pb) = (fa.project(y), fb.project(y));
+            let c = pa.normal.dot(&pb.normal);
+            let det = 1.0 - c * c;
+            if det <= 1e-12 {
+                return None; // tangent surfaces: no transversal crease
+            }
+            let alpha = (pa.distance - c * pb.distance) / det;
+            let beta = (pb.distance - c * pa.distance) / det;
+            *y -= pa.normal * alpha + pb.normal * beta;
+            Some(pa.normal.cross(&pb.normal))
+        };
         let mut y = *start;
         for _ in 0..CREASE_ITERATIONS {
-            let mut tangent = Vector3::zeros();
-            for _ in 0..2 {
-                let (pa, pb) = (fa.project(&y), fb.project(&y));
-                let c = pa.normal.dot(&pb.normal);
-                let det = 1.0 - c * c;
-                if det <= 1e-12 {
-                    return None; // tangent surfaces: no transversal crease
-                }
-                let alpha = (pa.distance - c * pb.distance) / det;
-                let beta = (pb.distance - c * pa.distance) / det;
-                y -= pa.normal * alpha + pb.normal * beta;
-                tangent = pa.normal.cross(&pb.normal);
-            }
+            newton(&mut y)?;
+            let tangent = newton(&mut y)?;
             let len = tangent.norm();
             if len <= 1e-9 {
                 return None;
@@ -202,28 +207,31 @@ impl SphereMeshGeometry {
             best = Some((e, pr));
         }
 
-        let consider = |e: usize,
-                        pr: Projection,
-                        best_d2: &mut f64,
-                        best: &mut Option<(usize, Projection)>| {
+        // Buried front-facing candidates, for crease searches once the best is known:
+        // (lower bound², element, burying element, start point).
+        let mut buried = [(0.0, 0, 0, Vector3::zeros()); MAX_CREASE_SEARCHES];
+        let mut n_buried = 0;
+        let mut consider = |e: usize,
+                            pr: Projection,
+                            best_d2: &mut f64,
+                            best: &mut Option<(usize, Projection)>| {
             let d2 = (p - pr.point).norm_squared();
             if d2 >= *best_d2 || view.is_back_facing(&pr.point, &pr.normal) {
                 return;
             }
-            let pr = match self.burier(&pr.point, BURIED_TOLERANCE, e0) {
-                None => pr,
-                // Buried: the element's front surface may still show next to the burying one,
-                // on the crease, which lies on ∂E_b too and so is at least |φ_b(p)| away.
-                Some(b) if self.frames[b].distance(p).powi(2) >= *best_d2 => return,
-                Some(b) => match self.crease_point(e, b, &pr.point, p) {
-                    Some(c) if !view.is_back_facing(&c.point, &c.normal) => c,
-                    _ => return,
-                },
-            };
-            let d2 = (p - pr.point).norm_squared();
-            if d2 < *best_d2 {
-                *best_d2 = d2;
-                *best = Some((e, pr));
+            match self.burier(&pr.point, BURIED_TOLERANCE, e0) {
+                None => {
+                    *best_d2 = d2;
+                    *best = Some((e, pr));
+                }
+                Some(b) => {
+                    // The crease lies on ∂E_e beyond the footpoint and on ∂E_b.
+                    let lb = d2.max(self.frames[b].distance(p).powi(2));
+                    if lb < *best_d2 && n_buried < MAX_CREASE_SEARCHES {
+                        buried[n_buried] = (lb, e, b, pr.point);
+                        n_buried += 1;
+                    }
+                }
             }
         };
         for (e, (frame, b)) in self.frames.iter().zip(&self.packed).enumerate() {
@@ -251,6 +259,23 @@ impl SphereMeshGeometry {
                             consider(e, w.plane_projection(tp, &foot), &mut best_d2, &mut best);
                         }
                     }
+                }
+            }
+        }
+
+        // Where an element's front surface dives into another, the visible surface ends on the
+        // crease: search those nearest first, while they can still win.
+        let buried = &mut buried[..n_buried];
+        buried.sort_unstable_by(|x, y| x.0.total_cmp(&y.0));
+        for &(lb, a, b, start) in buried.iter() {
+            if lb >= best_d2 {
+                break;
+            }
+            if let Some(c) = self.crease_point(a, b, &start, p) {
+                let d2 = (p - c.point).norm_squared();
+                if d2 < best_d2 && !view.is_back_facing(&c.point, &c.normal) {
+                    best_d2 = d2;
+                    best = Some((a, c));
                 }
             }
         }
