@@ -43,8 +43,9 @@ use super::union_silhouette::UnionSilhouette;
 use super::{is_usable, Part, Projection, View};
 use nalgebra::Vector3;
 
-/// A candidate is buried when it is deeper than this inside an element (model units, mm): points
-/// on an element's own surface evaluate to about ±1e-12 there.
+/// The merge test of the thesis's silhouette computation (§3.3.1: discard `v` with
+/// `φ_M(v) < 0`) with a tolerance: a candidate is buried when it is deeper than this inside an
+/// element (model units, mm), since points on an element's own surface evaluate to about ±1e-12.
 pub const BURIED_TOLERANCE: f64 = 1e-6;
 
 /// Outer iterations (two Newton steps onto the crease, then a step along it) of the crease
@@ -73,9 +74,11 @@ impl SphereMeshGeometry {
         out[0]
     }
 
-    /// [`project_front_facing`](Self::project_front_facing) for many points, writing into `out`
-    /// (same length as `points`). Allocates nothing: the silhouette is computed once for the
-    /// batch (only if some footpoint is back-facing) in a buffer on the stack (about 60 KiB).
+    /// [`project_front_facing`](Self::project_front_facing) (Fig. 3.9) for many points, e.g. the
+    /// data points of one frame, writing into `out` (same length as `points`). Allocates
+    /// nothing: the object-space silhouette (Fig. 3.10) is computed once for the batch (only if
+    /// some footpoint is back-facing) in a buffer on the stack (under 64 KiB). `None` entries for
+    /// non-finite points; all `None` for an invalid view.
     ///
     /// # Panics
     /// If `out.len() != points.len()`.

@@ -157,7 +157,9 @@ impl SphereMeshGeometry {
     }
 
     /// Re-poses the model with new sphere centers and radii (same count and order as in
-    /// [`new`](Self::new)), recomputing tangent planes and bounding balls. Allocates nothing.
+    /// [`new`](Self::new)), recomputing tangent planes and bounding balls: the per-iteration
+    /// refresh of the skeleton `S` of Eq. 3.1 after the kinematics moved its vertices
+    /// (Fig. 3.4). Allocates nothing.
     /// On error the geometry is left unchanged.
     pub fn update(&mut self, spheres: &[Sphere]) -> Result<(), GeometryError> {
         if spheres.len() != self.spheres.len() {
@@ -184,17 +186,17 @@ impl SphereMeshGeometry {
         Ok(())
     }
 
-    /// The spheres of the current pose.
+    /// The spheres `(c_*, r_*)` of the current pose (the skeleton vertices of Eq. 3.1).
     pub fn spheres(&self) -> &[Sphere] {
         &self.spheres
     }
 
-    /// The elements (pills and wedges).
+    /// The elements `E^e` (pills and wedges) of Eq. 3.6.
     pub fn elements(&self) -> &[Element] {
         &self.elements
     }
 
-    /// The bounding ball of each element in the current pose.
+    /// The bounding ball of each element in the current pose (culling of Eq. 3.6).
     pub fn bounding_balls(&self) -> &[BoundingBall] {
         &self.bounds
     }
@@ -234,8 +236,8 @@ impl SphereMeshGeometry {
     /// [`Projection::normal`] and its signed distance `φ_M(p)` is [`Projection::distance`].
     ///
     /// Elements are culled with their bounding balls: an element is evaluated only if its lower
-    /// bound `‖p − C_e‖ − R_e` is below the best distance found so far. `None` for a non-finite point or a model without
-    /// elements.
+    /// bound `‖p − C_e‖ − R_e` is not above the best distance found so far; ties go to the lower
+    /// element index. `None` for a non-finite point or a model without elements.
     pub fn project(&self, p: &Vector3<f64>) -> Option<Projection> {
         if !is_usable(p) {
             return None;
@@ -244,8 +246,8 @@ impl SphereMeshGeometry {
         Some(self.globalize(e, self.frames[e].project(p)))
     }
 
-    /// [`project`](Self::project) for many points, writing into `out` (same length as
-    /// `points`). Allocates nothing.
+    /// [`project`](Self::project) (Eq. 3.6) for many points, e.g. the 2500 data points of one
+    /// frame (§3.3.1), writing into `out` (same length as `points`). Allocates nothing.
     ///
     /// # Panics
     /// If `out.len() != points.len()`.
@@ -290,8 +292,8 @@ impl SphereMeshGeometry {
     ///
     /// Branch and bound: a greedy descent of the bounding-ball tree guesses an element and its
     /// distance `d`; then every other element is evaluated only if its bound `‖p − C_e‖ − R_e` is
-    /// below the best `d` so far, tested without square roots (`d + R_e > 0` and
-    /// `‖p − C_e‖² < (d + R_e)²`).
+    /// not above the best `d` so far, tested without square roots (`d + R_e > 0` and
+    /// `‖p − C_e‖² ≤ (d + R_e)²`).
     pub(super) fn nearest(&self, p: &Vector3<f64>) -> Option<(usize, f64)> {
         let first = self.tree.guess(p)?;
         let mut best = self.frames[first].distance(p);

@@ -94,7 +94,8 @@ pub struct Projection {
 }
 
 impl Projection {
-    /// Re-evaluates `q = Σ w_i c_i + (Σ w_i r_i)·n` from the model's spheres, in exactly the
+    /// Re-evaluates the footpoint as a point of the interpolated sphere `B(s, r(s))` of Eq. 3.1,
+    /// `q = Σ w_i c_i + (Σ w_i r_i)·n`, from the model's spheres, in exactly the
     /// floating-point order used to produce [`Projection::point`], so the result is bitwise equal
     /// to `self.point` when `spheres` are the ones the projection was computed on.
     ///
