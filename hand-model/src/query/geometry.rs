@@ -116,6 +116,31 @@ impl ElementFrame {
 ///
 /// Build it once per model with [`new`](Self::new), then call [`update`](Self::update) with the
 /// posed spheres every solver iteration; `update` and every query allocate nothing.
+///
+/// # Example
+/// ```
+/// use hand_model::query::{Part, SphereMeshGeometry, View};
+/// use hand_model::shape::{Element, Sphere};
+/// use nalgebra::Vector3;
+///
+/// // A finger-like pill along +y, radius 8 → 6 mm.
+/// let spheres = [
+///     Sphere::new(Vector3::new(0.0, 0.0, 0.0), 8.0),
+///     Sphere::new(Vector3::new(0.0, 40.0, 0.0), 6.0),
+/// ];
+/// let g = SphereMeshGeometry::new(&spheres, &[Element::Pill([0, 1])])?;
+/// let p = Vector3::new(20.0, 20.0, 0.0);
+/// let q = g.project(&p).expect("finite point");
+/// assert_eq!(q.part, Part::Cone);
+/// assert!(((p - q.point).norm() - q.distance).abs() < 1e-12);
+/// assert_eq!(q.reevaluate(g.spheres()), Some(q.point)); // q = Σ w c + (Σ w r) n, bit for bit
+///
+/// // Seen along +z from a camera in front of −z, a point behind the pill is matched to the
+/// // silhouette instead of the back-facing footpoint.
+/// let behind = g.project_front_facing(&Vector3::new(2.0, 20.0, 15.0), &View::Orthographic(Vector3::z()));
+/// assert_eq!(behind.map(|q| q.part), Some(Part::Silhouette));
+/// # Ok::<(), hand_model::query::GeometryError>(())
+/// ```
 #[derive(Clone, Debug)]
 pub struct SphereMeshGeometry {
     pub(super) spheres: Vec<Sphere>,
