@@ -10,6 +10,8 @@
 //! - [`cylinder`]: the Ch. 2 cylinder model (26 DOF) with its front-facing projection and the
 //!   htrack `.calib` importer;
 //! - [`keypoints`]: the 21 keypoints of DESIGN.md and handedness;
+//! - [`query`]: closest points on pills and wedges, the implicit function φ (Eq. 3.1–3.2, 3.6),
+//!   model-wide projection and the monocular front-facing correspondences (Fig. 3.9);
 //! - [`render`]: exact ray casting of elements, a tiled CPU depth renderer (§3.3.2), mesh export
 //!   (OBJ, GLB) and PNG previews;
 //! - [`testing`]: finite-difference helpers for Jacobian tests.
@@ -22,6 +24,7 @@ pub mod error;
 pub mod keypoints;
 pub mod kinematics;
 pub mod math;
+pub mod query;
 pub mod render;
 pub mod shape;
 pub mod spheremesh;

@@ -1,0 +1,379 @@
+//! A posed sphere-mesh prepared for queries: per-element tangent planes and bounding balls,
+//! refreshed once per solver iteration, and the model-wide closest-point projection
+//! `Π_M(p)` (Eq. 3.6: the element with the smallest `φ_e(p)` wins).
+
+use super::bounding::BoundingBall;
+use super::bvh::ElementTree;
+use super::point_pill::{valid_sphere, PillFrame};
+use super::point_wedge::WedgeFrame;
+use super::{is_usable, Projection};
+use crate::shape::{Element, Sphere};
+use nalgebra::Vector3;
+
+/// Why a [`SphereMeshGeometry`] could not be built or updated.
+#[derive(Copy, Clone, Debug, PartialEq, thiserror::Error)]
+pub enum GeometryError {
+    /// An element names a sphere that does not exist.
+    #[error("element {element} refers to sphere {sphere}, but the model has {count} spheres")]
+    SphereIndexOutOfRange {
+        /// Element index.
+        element: usize,
+        /// The offending sphere index.
+        sphere: u32,
+        /// Number of spheres.
+        count: usize,
+    },
+    /// A sphere has a non-finite center or radius, or a negative radius.
+    #[error("sphere {index} has a non-finite center or radius, or a negative radius")]
+    InvalidSphere {
+        /// Sphere index.
+        index: usize,
+    },
+    /// [`SphereMeshGeometry::update`] got a different number of spheres than the model has.
+    #[error("expected {expected} spheres, got {got}")]
+    SphereCountMismatch {
+        /// Number of spheres of the model.
+        expected: usize,
+        /// Number of spheres passed.
+        got: usize,
+    },
+}
+
+/// The per-pose data of one element.
+#[derive(Copy, Clone, Debug, PartialEq)]
+#[expect(
+    clippy::large_enum_variant,
+    reason = "frames sit inline in one Vec scanned by every query; boxing wedges would add a \
+              pointer chase per element visit"
+)]
+pub(crate) enum ElementFrame {
+    Pill(PillFrame),
+    Wedge(WedgeFrame),
+}
+
+impl ElementFrame {
+    #[inline]
+    pub(crate) fn distance(&self, p: &Vector3<f64>) -> f64 {
+        match self {
+            ElementFrame::Pill(f) => f.distance(p),
+            ElementFrame::Wedge(f) => f.distance(p),
+        }
+    }
+
+    /// The distance when it is not above `best`, otherwise some value `> best`.
+    #[inline]
+    pub(crate) fn distance_below(&self, p: &Vector3<f64>, best: f64) -> f64 {
+        match self {
+            ElementFrame::Pill(f) => f.distance(p),
+            ElementFrame::Wedge(f) => f.distance_below(p, best),
+        }
+    }
+
+    #[inline]
+    pub(crate) fn project(&self, p: &Vector3<f64>) -> Projection {
+        match self {
+            ElementFrame::Pill(f) => f.project(p),
+            ElementFrame::Wedge(f) => f.project(p),
+        }
+    }
+
+    pub(crate) fn centers(&self) -> &[Vector3<f64>] {
+        match self {
+            ElementFrame::Pill(f) => &f.centers,
+            ElementFrame::Wedge(f) => &f.centers,
+        }
+    }
+
+    pub(crate) fn radii(&self) -> &[f64] {
+        match self {
+            ElementFrame::Pill(f) => &f.radii,
+            ElementFrame::Wedge(f) => &f.radii,
+        }
+    }
+
+    fn build(element: &Element, spheres: &[Sphere]) -> Self {
+        let s = |i: u32| &spheres[i as usize];
+        match element {
+            Element::Pill([a, b]) => ElementFrame::Pill(PillFrame::new(s(*a), s(*b))),
+            Element::Wedge([a, b, c]) => {
+                ElementFrame::Wedge(WedgeFrame::new([s(*a), s(*b), s(*c)]))
+            }
+        }
+    }
+
+    fn bound(&self) -> BoundingBall {
+        match self {
+            ElementFrame::Pill(f) => BoundingBall::of_pill(f),
+            ElementFrame::Wedge(f) => BoundingBall::of_wedge(f),
+        }
+    }
+}
+
+/// A posed sphere-mesh `M` (Eq. 3.1) prepared for closest-point queries (§3.3.1): it caches,
+/// per element, the tangent planes of wedges and a bounding ball, so that
+/// [`project`](Self::project) evaluates the closed-form projections of Fig. 3.7 only on the few
+/// elements that can win the argmin of Eq. 3.6.
+///
+/// Build it once per model with [`new`](Self::new), then call [`update`](Self::update) with the
+/// posed spheres every solver iteration; `update` and every query allocate nothing.
+///
+/// # Example
+/// ```
+/// use hand_model::query::{Part, SphereMeshGeometry, View};
+/// use hand_model::shape::{Element, Sphere};
+/// use nalgebra::Vector3;
+///
+/// // A finger-like pill along +y, radius 8 → 6 mm.
+/// let spheres = [
+///     Sphere::new(Vector3::new(0.0, 0.0, 0.0), 8.0),
+///     Sphere::new(Vector3::new(0.0, 40.0, 0.0), 6.0),
+/// ];
+/// let g = SphereMeshGeometry::new(&spheres, &[Element::Pill([0, 1])])?;
+/// let p = Vector3::new(20.0, 20.0, 0.0);
+/// let q = g.project(&p).expect("finite point");
+/// assert_eq!(q.part, Part::Cone);
+/// assert!(((p - q.point).norm() - q.distance).abs() < 1e-12);
+/// assert_eq!(q.reevaluate(g.spheres()), Some(q.point)); // q = Σ w c + (Σ w r) n, bit for bit
+///
+/// // Seen along +z from a camera in front of −z, a point behind the pill is matched to the
+/// // silhouette instead of the back-facing footpoint.
+/// let behind = g.project_front_facing(&Vector3::new(2.0, 20.0, 15.0), &View::Orthographic(Vector3::z()));
+/// assert_eq!(behind.map(|q| q.part), Some(Part::Silhouette));
+/// # Ok::<(), hand_model::query::GeometryError>(())
+/// ```
+#[derive(Clone, Debug)]
+pub struct SphereMeshGeometry {
+    pub(super) spheres: Vec<Sphere>,
+    pub(super) elements: Vec<Element>,
+    pub(super) frames: Vec<ElementFrame>,
+    pub(super) bounds: Vec<BoundingBall>,
+    /// The bounding balls again as packed `[x, y, z, R]`, for the culling loop.
+    pub(super) packed: Vec<[f64; 4]>,
+    /// Bounding-ball hierarchy over the elements, for a first guess of the nearest element.
+    pub(super) tree: ElementTree,
+}
+
+impl SphereMeshGeometry {
+    /// Prepares the sphere-mesh with these spheres and elements (thesis §3.1, Fig. 3.4).
+    pub fn new(spheres: &[Sphere], elements: &[Element]) -> Result<Self, GeometryError> {
+        check_spheres(spheres)?;
+        for (e, el) in elements.iter().enumerate() {
+            if let Some(&sphere) = el.spheres().iter().find(|&&i| i as usize >= spheres.len()) {
+                return Err(GeometryError::SphereIndexOutOfRange {
+                    element: e,
+                    sphere,
+                    count: spheres.len(),
+                });
+            }
+        }
+        let frames: Vec<ElementFrame> = elements
+            .iter()
+            .map(|el| ElementFrame::build(el, spheres))
+            .collect();
+        let bounds: Vec<BoundingBall> = frames.iter().map(ElementFrame::bound).collect();
+        Ok(Self {
+            spheres: spheres.to_vec(),
+            elements: elements.to_vec(),
+            frames,
+            packed: bounds.iter().map(pack).collect(),
+            tree: ElementTree::build(&bounds),
+            bounds,
+        })
+    }
+
+    /// Re-poses the model with new sphere centers and radii (same count and order as in
+    /// [`new`](Self::new)), recomputing tangent planes and bounding balls: the per-iteration
+    /// refresh of the skeleton `S` of Eq. 3.1 after the kinematics moved its vertices
+    /// (Fig. 3.4). Allocates nothing.
+    /// On error the geometry is left unchanged.
+    pub fn update(&mut self, spheres: &[Sphere]) -> Result<(), GeometryError> {
+        if spheres.len() != self.spheres.len() {
+            return Err(GeometryError::SphereCountMismatch {
+                expected: self.spheres.len(),
+                got: spheres.len(),
+            });
+        }
+        check_spheres(spheres)?;
+        self.spheres.copy_from_slice(spheres);
+        for ((frame, bound), el) in self
+            .frames
+            .iter_mut()
+            .zip(self.bounds.iter_mut())
+            .zip(&self.elements)
+        {
+            *frame = ElementFrame::build(el, spheres);
+            *bound = frame.bound();
+        }
+        for (packed, b) in self.packed.iter_mut().zip(&self.bounds) {
+            *packed = pack(b);
+        }
+        self.tree.refit(&self.bounds);
+        Ok(())
+    }
+
+    /// The spheres `(c_*, r_*)` of the current pose (the skeleton vertices of Eq. 3.1).
+    pub fn spheres(&self) -> &[Sphere] {
+        &self.spheres
+    }
+
+    /// The elements `E^e` (pills and wedges) of Eq. 3.6.
+    pub fn elements(&self) -> &[Element] {
+        &self.elements
+    }
+
+    /// The bounding ball of each element in the current pose (culling of Eq. 3.6).
+    pub fn bounding_balls(&self) -> &[BoundingBall] {
+        &self.bounds
+    }
+
+    /// The model's implicit function `φ_M(p) = min_e φ_e(p)` (Eq. 3.6) as a signed distance:
+    /// exact outside the model; inside, the depth in the element that contains `p` most deeply
+    /// (a lower bound of the depth in the union where elements overlap). `None` for a non-finite
+    /// point or a model without elements.
+    pub fn phi(&self, p: &Vector3<f64>) -> Option<f64> {
+        if !is_usable(p) {
+            return None;
+        }
+        self.nearest(p).map(|(_, d)| d)
+    }
+
+    /// Signed distance from `p` to element `element` alone (`φ_e(p)`, Eq. 3.1 on one element).
+    /// `None` for a non-finite point or an out-of-range index.
+    pub fn phi_element(&self, element: usize, p: &Vector3<f64>) -> Option<f64> {
+        if !is_usable(p) {
+            return None;
+        }
+        self.frames.get(element).map(|f| f.distance(p))
+    }
+
+    /// Closest-point projection on one element (Fig. 3.7), with global sphere indices.
+    /// `None` for a non-finite point or an out-of-range index.
+    pub fn project_on_element(&self, element: usize, p: &Vector3<f64>) -> Option<Projection> {
+        if !is_usable(p) {
+            return None;
+        }
+        let frame = self.frames.get(element)?;
+        Some(self.globalize(element, frame.project(p)))
+    }
+
+    /// The model-wide closest-point projection `q = Π_M(p)` (Eq. 3.6): the footpoint on the
+    /// element with the smallest signed distance `φ_e(p)`. Its outward normal is
+    /// [`Projection::normal`] and its signed distance `φ_M(p)` is [`Projection::distance`].
+    ///
+    /// Elements are culled with their bounding balls: an element is evaluated only if its lower
+    /// bound `‖p − C_e‖ − R_e` is not above the best distance found so far; ties go to the lower
+    /// element index. `None` for a non-finite point or a model without elements.
+    pub fn project(&self, p: &Vector3<f64>) -> Option<Projection> {
+        if !is_usable(p) {
+            return None;
+        }
+        let (e, _) = self.nearest(p)?;
+        Some(self.globalize(e, self.frames[e].project(p)))
+    }
+
+    /// [`project`](Self::project) (Eq. 3.6) for many points, e.g. the 2500 data points of one
+    /// frame (§3.3.1), writing into `out` (same length as `points`). Allocates nothing.
+    ///
+    /// # Panics
+    /// If `out.len() != points.len()`.
+    #[track_caller]
+    pub fn project_points(&self, points: &[Vector3<f64>], out: &mut [Option<Projection>]) {
+        assert_eq!(points.len(), out.len(), "one output slot per point");
+        for (p, o) in points.iter().zip(out.iter_mut()) {
+            *o = self.project(p);
+        }
+    }
+
+    /// Whether `x` lies inside some element by more than `tol` (`φ_M(x) < −tol`): such a point
+    /// of an element's surface is buried in another element and is not on the model's surface
+    /// (the merge test of the thesis's silhouette computation, §3.3.1). `false` for a
+    /// non-finite `x`.
+    pub fn is_buried(&self, x: &Vector3<f64>, tol: f64) -> bool {
+        is_usable(x) && self.burier(x, tol, 0).is_some()
+    }
+
+    /// The element burying `x` (`φ_e(x) < −tol`), trying `hint` first. Bounding balls cull the
+    /// scan: `x` can be inside `e` by more than `tol` only if `‖x − C_e‖ < R_e − tol`.
+    pub(super) fn burier(&self, x: &Vector3<f64>, tol: f64, hint: usize) -> Option<usize> {
+        let inside = |e: usize, &[bx, by, bz, radius]: &[f64; 4]| {
+            let reach = radius - tol;
+            let (dx, dy, dz) = (x.x - bx, x.y - by, x.z - bz);
+            reach > 0.0
+                && dx * dx + dy * dy + dz * dz < reach * reach
+                && self.frames[e].distance(x) < -tol
+        };
+        if let Some(b) = self.packed.get(hint) {
+            if inside(hint, b) {
+                return Some(hint);
+            }
+        }
+        self.packed
+            .iter()
+            .enumerate()
+            .position(|(e, b)| e != hint && inside(e, b))
+    }
+
+    /// The element minimising `φ_e(p)` and that minimum (`p` finite).
+    ///
+    /// Branch and bound: a greedy descent of the bounding-ball tree guesses an element and its
+    /// distance `d`; then every other element is evaluated only if its bound `‖p − C_e‖ − R_e` is
+    /// not above the best `d` so far, tested without square roots (`d + R_e > 0` and
+    /// `‖p − C_e‖² ≤ (d + R_e)²`).
+    pub(super) fn nearest(&self, p: &Vector3<f64>) -> Option<(usize, f64)> {
+        let first = self.tree.guess(p)?;
+        let mut best = self.frames[first].distance(p);
+        let mut best_e = first;
+        let (px, py, pz) = (p.x, p.y, p.z);
+        let survives = |b: &[f64; 4], best: f64| {
+            let (dx, dy, dz) = (px - b[0], py - b[1], pz - b[2]);
+            let t = best + b[3];
+            t > 0.0 && dx * dx + dy * dy + dz * dz <= t * t
+        };
+        let visit = |e: usize, best: &mut f64, best_e: &mut usize| {
+            if let Some(frame) = self.frames.get(e) {
+                let d = frame.distance_below(p, *best);
+                // Ties go to the lower index, so the answer does not depend on the first guess.
+                if d < *best || (d == *best && e < *best_e) {
+                    *best = d;
+                    *best_e = e;
+                }
+            }
+        };
+        for (chunk, balls) in self.packed.chunks(64).enumerate() {
+            // Branch-free pass against the guess's distance, then the survivors in order,
+            // re-tested against the improving best.
+            let mut mask = 0u64;
+            for (k, b) in balls.iter().enumerate() {
+                mask |= u64::from(survives(b, best)) << k;
+            }
+            while mask != 0 {
+                let k = mask.trailing_zeros() as usize;
+                mask &= mask - 1;
+                let e = chunk * 64 + k;
+                if e != first && survives(&balls[k], best) {
+                    visit(e, &mut best, &mut best_e);
+                }
+            }
+        }
+        Some((best_e, best))
+    }
+
+    /// Re-expresses an element-local projection over the model's sphere indices.
+    pub(super) fn globalize(&self, element: usize, mut pr: Projection) -> Projection {
+        let ids = self.elements[element].spheres();
+        pr.spheres = pr.spheres.map(|l| ids[l as usize]);
+        pr.element = element as u32;
+        pr
+    }
+}
+
+fn pack(b: &BoundingBall) -> [f64; 4] {
+    [b.center.x, b.center.y, b.center.z, b.radius]
+}
+
+fn check_spheres(spheres: &[Sphere]) -> Result<(), GeometryError> {
+    match spheres.iter().position(|s| !valid_sphere(s)) {
+        Some(index) => Err(GeometryError::InvalidSphere { index }),
+        None => Ok(()),
+    }
+}

@@ -1,0 +1,74 @@
+//! The per-iteration queries allocate nothing: `update`, `project_points` and
+//! `project_points_front_facing` run under a counting global allocator.
+// Implementing `GlobalAlloc` needs `unsafe`; it only forwards to the system allocator.
+#![allow(unsafe_code)]
+
+#[path = "../benches/support/hand_like.rs"]
+mod hand_like;
+
+use hand_like::hand_like_geometry;
+use hand_model::query::{SphereMeshGeometry, View};
+use nalgebra::Vector3;
+use std::alloc::{GlobalAlloc, Layout, System};
+use std::sync::atomic::{AtomicUsize, Ordering};
+
+struct Counting;
+
+static ALLOCATIONS: AtomicUsize = AtomicUsize::new(0);
+
+unsafe impl GlobalAlloc for Counting {
+    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
+        ALLOCATIONS.fetch_add(1, Ordering::SeqCst);
+        unsafe { System.alloc(layout) }
+    }
+
+    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
+        unsafe { System.dealloc(ptr, layout) }
+    }
+}
+
+#[global_allocator]
+static GLOBAL: Counting = Counting;
+
+#[test]
+fn per_iteration_queries_do_not_allocate() {
+    let (spheres, elements) = hand_like_geometry();
+    let mut g = SphereMeshGeometry::new(&spheres, &elements).unwrap();
+    let moved: Vec<_> = spheres
+        .iter()
+        .map(|s| hand_model::shape::Sphere::new(s.center + Vector3::new(1.0, -2.0, 0.5), s.radius))
+        .collect();
+    let points: Vec<Vector3<f64>> = (0..500)
+        .map(|i| {
+            let t = i as f64 * 0.37;
+            Vector3::new(
+                60.0 * t.sin(),
+                60.0 + 70.0 * (0.7 * t).cos(),
+                25.0 * (1.3 * t).sin(),
+            )
+        })
+        .collect();
+    let mut out = vec![None; points.len()];
+    let views = [
+        View::Orthographic(Vector3::z()),
+        View::Perspective {
+            camera_center: Vector3::new(0.0, 50.0, -400.0),
+        },
+    ];
+
+    // This file holds a single test, so nothing else allocates while it runs.
+    let before = ALLOCATIONS.load(Ordering::SeqCst);
+    g.update(&moved).unwrap();
+    g.project_points(&points, &mut out);
+    for view in &views {
+        g.project_points_front_facing(&points, view, &mut out);
+    }
+    let single = g.project_front_facing(&points[0], &views[0]);
+    let after = ALLOCATIONS.load(Ordering::SeqCst);
+    assert!(single.is_some() && out.iter().all(Option::is_some));
+    assert_eq!(
+        after - before,
+        0,
+        "allocations during per-iteration queries"
+    );
+}
