@@ -79,6 +79,25 @@ impl PosedSphereMesh {
         }
     }
 
+    /// Visit `(d, ∂q/∂θ_d)` for a footpoint `q = Σ w_i c_i + (Σ w_i r_i)·n` given by its spheres
+    /// and barycentric weights (a [`crate::query::Projection`]): the weighted sum of the sphere
+    /// centers' columns, with `n` held fixed. The residual `n·(p − q)` of the d2m term (Eq. 3.4)
+    /// then has the exact derivative `−n·∂q/∂θ` (the change of `n` is orthogonal to `p − q`), also
+    /// for elements whose spheres ride on different bones (membranes, the thumb web).
+    pub fn for_each_footpoint_column(
+        &self,
+        template: &SphereMeshTemplate,
+        spheres: &[u32; 3],
+        weights: &[f64; 3],
+        f: &mut dyn FnMut(usize, Vector3<f64>),
+    ) {
+        for (&s, &w) in spheres.iter().zip(weights) {
+            if w != 0.0 {
+                self.for_each_center_column(template, s as usize, &mut |d, col| f(d, col * w));
+            }
+        }
+    }
+
     /// The 21 keypoints of DESIGN.md in the camera frame: joints are bone origins (rotation
     /// centers); a tip is the tip sphere's center plus its radius along the bone's +y axis.
     pub fn keypoints(&self, template: &SphereMeshTemplate) -> [Vector3<f64>; NUM_KEYPOINTS] {

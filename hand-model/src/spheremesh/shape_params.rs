@@ -668,6 +668,28 @@ impl ShapeBasis {
         }
     }
 
+    /// Visit `(j, ∂q/∂β_j)` for a footpoint `q = Σ w_i c_i + (Σ w_i r_i)·n` (a
+    /// [`crate::query::Projection`]'s spheres, weights and normal): `Σ w_i (∂c_i/∂β_j + n·∂r_i/∂β_j)`.
+    /// This is the β column of the data terms of thesis §4.3 (ANCHOR-FACTS §2.5 "β Jacobian
+    /// rules"), exact for the residual `n·(p − q)`.
+    pub fn for_each_footpoint_column(
+        &self,
+        template: &SphereMeshTemplate,
+        posed: &PosedSphereMesh,
+        spheres: &[u32; 3],
+        weights: &[f64; 3],
+        normal: &Vector3<f64>,
+        f: &mut dyn FnMut(usize, Vector3<f64>),
+    ) {
+        for (&s, &w) in spheres.iter().zip(weights) {
+            if w != 0.0 {
+                self.for_each_sphere_column(template, posed, s as usize, &mut |j, dc, dr| {
+                    f(j, (dc + normal * dr) * w)
+                });
+            }
+        }
+    }
+
     /// Eq. 4.14: β = β̄ ∘ I·β̃ for the latent scale factors β̃ = (height, width, thickness)
     /// (1 = template). ∂β_i/∂β̃_k = β̄_i when entry i scales with axis k ([`ShapeKind::latent_axis`]).
     pub fn from_latent(&self, latent: [f64; 3]) -> Vec<f64> {
