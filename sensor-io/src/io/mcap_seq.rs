@@ -24,6 +24,10 @@ use crate::error::{Result, SensorError};
 use crate::image::{ColorImage, DepthImage, Frame};
 use crate::record::HandRecord;
 
+/// Largest MCAP record or chunk accepted when reading (bytes): far above a VGA depth frame in
+/// JSON (≈ 0.8 MB) yet small enough that a corrupt length cannot exhaust memory.
+pub const MAX_RECORD_BYTES: usize = 64 << 20;
+
 /// Topic of depth images.
 pub const DEPTH_TOPIC: &str = "/camera/depth";
 /// Topic of color images.
@@ -244,7 +248,10 @@ impl McapReader {
     /// precede the first depth image.
     pub fn open(path: &Path) -> Result<Self> {
         let file = File::open(path).map_err(|e| SensorError::io(path, e))?;
-        let mut messages = mcap::io::MessageReader::new(BufReader::new(file));
+        // Bound every record (and chunk, validated before use) so that a corrupt length field
+        // gives an error instead of a huge allocation (found by the `mcap_sequence` fuzz target).
+        let options = mcap::sans_io::LinearReaderOptions { record_length_limit: Some(MAX_RECORD_BYTES), prevalidate_chunk_crcs: true, ..Default::default() };
+        let mut messages = mcap::io::MessageReader::new_with_options(BufReader::new(file), options);
         let mut camera = None;
         let mut pending = None;
         for m in messages.by_ref() {
