@@ -175,6 +175,16 @@ fn mcap_round_trip_and_corruption() {
             }
         }
     }
+    // An attachment record too short for its own header made the `mcap` decoder panic on a
+    // slice index (a fuzzing find): the reader reports an error instead.
+    let mut evil = b"\x89MCAP0\r\n".to_vec();
+    evil.push(0x09);
+    evil.extend_from_slice(&33u64.to_le_bytes());
+    evil.extend_from_slice(&[0u8; 24]);
+    evil.extend_from_slice(&1u64.to_le_bytes());
+    evil.push(0);
+    std::fs::write(dir.join("evil.mcap"), &evil).expect("w");
+    assert!(open_sequence(&dir.join("evil.mcap")).is_err());
     // Garbage.
     std::fs::write(dir.join("junk.mcap"), b"not an mcap file at all").expect("w");
     assert!(open_sequence(&dir.join("junk.mcap")).is_err());

@@ -215,7 +215,7 @@ impl SequenceWriter for McapWriter {
 pub struct McapReader {
     path: PathBuf,
     camera: Camera,
-    messages: mcap::io::MessageReader<BufReader<File>>,
+    messages: Messages,
     pending: Option<mcap::Message<'static>>,
     index: u64,
 }
@@ -243,6 +243,24 @@ fn decode_image(path: &Path, v: &Value) -> Result<(u32, u32, String, Vec<u8>)> {
     Ok((w, h, enc, bytes))
 }
 
+type Messages = mcap::io::MessageReader<BufReader<File>>;
+
+/// The next message, with decoder errors and decoder panics (the `mcap` crate indexes slices with
+/// unchecked lengths on some corrupt attachment records — a fuzzing find) turned into an error.
+/// Callers stop reading at the first error (a failed frame leaves no pending message), so a
+/// stream is never resumed after a decoder panic.
+fn guarded_next(messages: &mut Messages, path: &Path) -> Option<Result<mcap::Message<'static>>> {
+    match std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| messages.next())) {
+        Ok(None) => None,
+        Ok(Some(Ok(m))) => Some(Ok(m)),
+        Ok(Some(Err(e))) => Some(Err(SensorError::format(path, format!("corrupt MCAP: {e}")))),
+        Err(_) => Some(Err(SensorError::format(
+            path,
+            "corrupt MCAP (decoder failure)",
+        ))),
+    }
+}
+
 impl McapReader {
     /// Open an MCAP sequence; the camera comes from the first calibration message, which must
     /// precede the first depth image.
@@ -250,12 +268,16 @@ impl McapReader {
         let file = File::open(path).map_err(|e| SensorError::io(path, e))?;
         // Bound every record (and chunk, validated before use) so that a corrupt length field
         // gives an error instead of a huge allocation (found by the `mcap_sequence` fuzz target).
-        let options = mcap::sans_io::LinearReaderOptions { record_length_limit: Some(MAX_RECORD_BYTES), prevalidate_chunk_crcs: true, ..Default::default() };
+        let options = mcap::sans_io::LinearReaderOptions {
+            record_length_limit: Some(MAX_RECORD_BYTES),
+            prevalidate_chunk_crcs: true,
+            ..Default::default()
+        };
         let mut messages = mcap::io::MessageReader::new_with_options(BufReader::new(file), options);
         let mut camera = None;
         let mut pending = None;
-        for m in messages.by_ref() {
-            let m = m.map_err(|e| SensorError::format(path, format!("corrupt MCAP: {e}")))?;
+        while let Some(m) = guarded_next(&mut messages, path) {
+            let m = m?;
             match m.channel.topic.as_str() {
                 CALIBRATION_TOPIC => {
                     let v: Value = serde_json::from_slice(&m.data)
@@ -343,8 +365,8 @@ impl McapReader {
         };
         let mut record = None;
         // Messages of the same frame share its log time; the next depth image starts a new frame.
-        for m in self.messages.by_ref() {
-            let m = m.map_err(|e| SensorError::format(&p, format!("corrupt MCAP: {e}")))?;
+        while let Some(m) = guarded_next(&mut self.messages, &p) {
+            let m = m?;
             if m.channel.topic == DEPTH_TOPIC {
                 self.pending = Some(m);
                 break;
