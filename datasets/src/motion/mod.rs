@@ -67,6 +67,7 @@ pub use library::MotionLibrary;
 
 use std::f64::consts::PI;
 
+use hand_model::kinematics::names::{concat_names, DIGIT_DOFS, WRIST_DOFS};
 use hand_model::kinematics::{DofKind, Pose, Skeleton};
 use hand_model::math::euler_xyz_to_matrix;
 use nalgebra::{Matrix3, Vector3};
@@ -76,40 +77,10 @@ use track::Track;
 
 /// The joint DOFs a motion drives, in the default template's pose-vector order (after the six
 /// global DOFs).
-pub const JOINT_DOFS: [&str; 22] = [
-    "wrist_abd",
-    "wrist_flex",
-    "thumb_cmc_abd",
-    "thumb_cmc_flex",
-    "thumb_mcp_flex",
-    "thumb_ip_flex",
-    "index_mcp_abd",
-    "index_mcp_flex",
-    "index_pip_flex",
-    "index_dip_flex",
-    "middle_mcp_abd",
-    "middle_mcp_flex",
-    "middle_pip_flex",
-    "middle_dip_flex",
-    "ring_mcp_abd",
-    "ring_mcp_flex",
-    "ring_pip_flex",
-    "ring_dip_flex",
-    "pinky_mcp_abd",
-    "pinky_mcp_flex",
-    "pinky_pip_flex",
-    "pinky_dip_flex",
-];
+pub const JOINT_DOFS: [&str; 22] = concat_names(WRIST_DOFS, DIGIT_DOFS);
 
 /// The six global DOFs, in pose-vector order.
-pub const GLOBAL_DOFS: [&str; 6] = [
-    "global_tx",
-    "global_ty",
-    "global_tz",
-    "global_rx",
-    "global_ry",
-    "global_rz",
-];
+pub const GLOBAL_DOFS: [&str; 6] = hand_model::kinematics::names::GLOBAL_DOFS;
 
 /// The palm center in the model frame (mm): the point that [`Placement::position`] places and
 /// about which the global rotations turn.

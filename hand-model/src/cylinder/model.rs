@@ -6,40 +6,14 @@ use nalgebra::{Matrix3, Vector3};
 
 use crate::error::{ModelError, Result};
 use crate::keypoints::{Handedness, NUM_KEYPOINTS};
+use crate::kinematics::names::{concat_names, DIGIT_DOFS, GLOBAL_DOFS};
 use crate::kinematics::{Bone, Dof, DofKind, Pose, PosedSkeleton, Skeleton};
 use crate::math::Rigid3;
 
 /// The 26 DOF names of the cylinder model in pose-vector order (thesis §2.2: 6 global + 20
 /// articulations). The order of the articulations is htrack's θ order (thumb, index, middle,
 /// ring, pinky; abduction first), see [`super::HTRACK_THETA_LAYOUT`].
-pub const CYLINDER_DOF_NAMES: [&str; 26] = [
-    "global_tx",
-    "global_ty",
-    "global_tz",
-    "global_rx",
-    "global_ry",
-    "global_rz",
-    "thumb_cmc_abd",
-    "thumb_cmc_flex",
-    "thumb_mcp_flex",
-    "thumb_ip_flex",
-    "index_mcp_abd",
-    "index_mcp_flex",
-    "index_pip_flex",
-    "index_dip_flex",
-    "middle_mcp_abd",
-    "middle_mcp_flex",
-    "middle_pip_flex",
-    "middle_dip_flex",
-    "ring_mcp_abd",
-    "ring_mcp_flex",
-    "ring_pip_flex",
-    "ring_dip_flex",
-    "pinky_mcp_abd",
-    "pinky_mcp_flex",
-    "pinky_pip_flex",
-    "pinky_dip_flex",
-];
+pub const CYLINDER_DOF_NAMES: [&str; 26] = concat_names(GLOBAL_DOFS, DIGIT_DOFS);
 
 /// One sphere-capped, tapered, elliptical cylinder (thesis §2.2, Fig. 4.10; htrack's `Segment`).
 ///

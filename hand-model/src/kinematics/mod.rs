@@ -4,6 +4,7 @@
 //! degrees of freedom; a [`Pose`] is the vector θ of their values; [`PosedSkeleton`] evaluates
 //! forward kinematics and the skeleton Jacobian `∂p/∂θ` of any point attached to a bone.
 
+pub mod names;
 mod pose;
 mod posed;
 mod skeleton;
