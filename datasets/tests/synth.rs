@@ -137,7 +137,7 @@ fn segmentations_find_the_synthetic_hand() {
         &cam,
         &DepthOnlyParams::default(),
         &mut seg2,
-        &mut DistanceTransform::default(),
+        &mut sensor_io::preprocess::SegmentScratch::default(),
     );
     let d_iou = iou(&seg2.mask);
     eprintln!("silhouette IoU with the rendered hand: wristband {w_iou:.3}, depth-only {d_iou:.3}");

@@ -7,7 +7,7 @@ use std::path::{Path, PathBuf};
 
 use sensor_io::dt::DistanceTransform;
 use sensor_io::io::read_depth_png;
-use sensor_io::preprocess::{segment_depth_only, DepthOnlyParams, HandSegment};
+use sensor_io::preprocess::{segment_depth_only, DepthOnlyParams, HandSegment, SegmentScratch};
 use sensor_io::{Camera, DepthImage};
 
 fn reference(rel: &str) -> Option<PathBuf> {
@@ -35,8 +35,13 @@ fn read_nyu_depth(path: &Path) -> DepthImage {
 
 fn segment(depth: &DepthImage, cam: &Camera) -> HandSegment {
     let mut seg = HandSegment::default();
-    let mut dt = DistanceTransform::default();
-    segment_depth_only(depth, cam, &DepthOnlyParams::default(), &mut seg, &mut dt);
+    segment_depth_only(
+        depth,
+        cam,
+        &DepthOnlyParams::default(),
+        &mut seg,
+        &mut SegmentScratch::default(),
+    );
     seg
 }
 

@@ -98,7 +98,7 @@ pub struct Preprocessor {
     all_pixels: Vec<u32>,
     picks: Vec<usize>,
     sampler: FarthestSampler,
-    scratch_dt: DistanceTransform,
+    segment_scratch: super::segment::SegmentScratch,
 }
 
 impl Preprocessor {
@@ -140,9 +140,13 @@ impl Preprocessor {
         };
         clip_range(&mut out.depth, cfg.near, cfg.far);
         match &cfg.segmentation {
-            Segmentation::DepthOnly(p) => {
-                segment_depth_only(&out.depth, &cam, p, &mut out.hand, &mut self.scratch_dt)
-            }
+            Segmentation::DepthOnly(p) => segment_depth_only(
+                &out.depth,
+                &cam,
+                p,
+                &mut out.hand,
+                &mut self.segment_scratch,
+            ),
             Segmentation::Wristband(p) => match &frame.color {
                 Some(c) if cfg.downsample <= 1 => {
                     segment_wristband(&out.depth, c, &cam, p, &mut out.hand)

@@ -24,6 +24,18 @@ pub struct HandSegment {
     pub wristband: Option<(Vector3<f64>, Vector3<f64>)>,
 }
 
+/// Reusable buffers of [`segment_depth_only`], so that segmenting a frame allocates nothing once
+/// the buffers have grown to the image size.
+#[derive(Clone, Debug, Default)]
+pub struct SegmentScratch {
+    dt: DistanceTransform,
+    queue: VecDeque<usize>,
+    inv: Mask,
+    pixels: Vec<usize>,
+    pts: Vec<Vector3<f64>>,
+    t: Vec<f64>,
+}
+
 /// Parameters of the depth-only segmentation.
 #[derive(Clone, Debug)]
 pub struct DepthOnlyParams {
@@ -122,8 +134,16 @@ pub fn segment_depth_only(
     camera: &Camera,
     params: &DepthOnlyParams,
     out: &mut HandSegment,
-    dt: &mut DistanceTransform,
+    scratch: &mut SegmentScratch,
 ) {
+    let SegmentScratch {
+        dt,
+        queue,
+        inv,
+        pixels,
+        pts,
+        t,
+    } = scratch;
     let (w, h) = (depth.width as usize, depth.height as usize);
     out.mask.width = depth.width;
     out.mask.height = depth.height;
@@ -137,7 +157,7 @@ pub fn segment_depth_only(
     };
     let seed_p = point(depth, camera, seed);
     let r2 = params.radius * params.radius;
-    let mut queue = VecDeque::with_capacity(4096);
+    queue.clear();
     queue.push_back(seed);
     out.mask.data[seed] = 1;
     while let Some(i) = queue.pop_front() {
@@ -183,7 +203,10 @@ pub fn segment_depth_only(
         }
     }
     let (cw, ch) = (u1 - u0 + 3, v1 - v0 + 3);
-    let mut inv = Mask::zeros(cw as u32, ch as u32);
+    inv.width = cw as u32;
+    inv.height = ch as u32;
+    inv.data.clear();
+    inv.data.resize(cw * ch, 0);
     for (k, x) in inv.data.iter_mut().enumerate() {
         let (cu, cv) = (k % cw, k / cw);
         let inside = cu >= 1
@@ -193,14 +216,17 @@ pub fn segment_depth_only(
             && out.mask.data[(cv - 1 + v0) * w + (cu - 1 + u0)] != 0;
         *x = (!inside) as u8;
     }
-    dt.compute(&inv);
+    dt.compute(inv);
+    let dt = &*dt;
     let radius_mm = |i: usize| {
         let (u, v) = (i % w - u0 + 1, i / w - v0 + 1);
         (dt.dist2[v * cw + u].sqrt() as f64) * depth.data[i] as f64 * camera.depth_unit_mm
             / camera.fx
     };
-    let pixels: Vec<usize> = (0..w * h).filter(|&i| out.mask.data[i] != 0).collect();
-    let pts: Vec<Vector3<f64>> = pixels.iter().map(|&i| point(depth, camera, i)).collect();
+    pixels.clear();
+    pixels.extend((0..w * h).filter(|&i| out.mask.data[i] != 0));
+    pts.clear();
+    pts.extend(pixels.iter().map(|&i| point(depth, camera, i)));
     let n = pts.len() as f64;
     let mean = pts.iter().sum::<Vector3<f64>>() / n;
     let cov = pts
@@ -210,7 +236,8 @@ pub fn segment_depth_only(
         / n;
     let eig = SymmetricEigen::new(cov);
     let axis = eig.eigenvectors.column(eig.eigenvalues.imax()).into_owned();
-    let t: Vec<f64> = pts.iter().map(|p| (p - mean).dot(&axis)).collect();
+    t.clear();
+    t.extend(pts.iter().map(|p| (p - mean).dot(&axis)));
     let (t_min, t_max) = t
         .iter()
         .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &x| {
