@@ -24,6 +24,7 @@ pub mod kinematics;
 pub mod math;
 pub mod render;
 pub mod shape;
+pub mod solver;
 pub mod spheremesh;
 pub mod testing;
 
