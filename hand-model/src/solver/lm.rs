@@ -316,7 +316,7 @@ const RECOVERY_ATTEMPTS: i32 = 10;
 /// # Unknowns
 /// `δ = [δθ (num_dofs, tangent layout of Pose::retract) | δaux (num_aux)]`. Auxiliary unknowns
 /// are appended after the pose DOFs (e.g. the PCA latents of the augmented pose prior, which
-/// [`super::terms::PosePrior::augmented`] places at a given offset ≥ `num_dofs`); the solver
+/// [`super::terms::PosePrior::with_aux_offset`] places at a given offset ≥ `num_dofs`); the solver
 /// solves for them jointly and hands their step to [`LmCallback::apply_aux`].
 ///
 /// # One iteration (STYLE practices 4–9)

@@ -150,8 +150,14 @@ impl NormalEquations {
         residual: f64,
         weight: f64,
     ) -> Result<TermStats, TermError> {
-        if !row.is_empty() {
-            self.check(offset + row.len() - 1)?;
+        match offset.checked_add(row.len()) {
+            Some(end) if end <= self.n => {}
+            _ => {
+                return Err(TermError::IndexOutOfRange {
+                    index: offset.saturating_add(row.len()).saturating_sub(1),
+                    dim: self.n,
+                })
+            }
         }
         self.symmetric = false;
         for (b, &jb) in row.iter().enumerate() {

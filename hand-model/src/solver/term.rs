@@ -78,7 +78,12 @@ pub struct SkeletonCtx<'a> {
 }
 
 impl<'a> SkeletonCtx<'a> {
-    /// A context posed at `pose` (which must have one value per DOF of `skeleton`).
+    /// A context posed at `pose`.
+    ///
+    /// # Panics
+    /// When `pose` does not have one value per DOF of `skeleton` (the precondition of
+    /// [`PosedSkeleton::update`]); [`crate::solver::LmSolver::solve`] checks the pose it is
+    /// given before re-posing.
     pub fn new(skeleton: &'a Skeleton, pose: &Pose) -> Self {
         Self {
             skeleton,
@@ -87,7 +92,8 @@ impl<'a> SkeletonCtx<'a> {
         }
     }
 
-    /// Re-pose (allocation-free once sized): copy `pose` and run forward kinematics.
+    /// Re-pose (allocation-free once sized): copy `pose` and run forward kinematics. Same
+    /// precondition as [`SkeletonCtx::new`].
     pub fn set_pose(&mut self, pose: &Pose) {
         self.pose.values.clone_from(&pose.values);
         self.posed.update(self.skeleton, &self.pose);
