@@ -14,6 +14,9 @@
 //!   model-wide projection and the monocular front-facing correspondences (Fig. 3.9);
 //! - [`render`]: exact ray casting of elements, a tiled CPU depth renderer (§3.3.2), mesh export
 //!   (OBJ, GLB) and PNG previews;
+//! - [`solver`]: normal equations, the one trait of every energy term, Levenberg–Marquardt
+//!   (Eq. 2.11) with a rigid-first schedule, and the shared prior terms (joint limits, damping,
+//!   temporal, projective PCA pose prior);
 //! - [`testing`]: finite-difference helpers for Jacobian tests.
 //!
 //! Units are millimetres and radians; frames follow `DESIGN.md` (model frame: origin at the back
@@ -27,6 +30,7 @@ pub mod math;
 pub mod query;
 pub mod render;
 pub mod shape;
+pub mod solver;
 pub mod spheremesh;
 pub mod testing;
 

@@ -1,0 +1,434 @@
+//! Pose-space PCA data (thesis §2.3.2 "Pose Space Prior", Fig. 2.10) and the loader of the
+//! original binary files (ANCHOR-FACTS §4).
+//!
+//! # File format (htrack `Eigen::read_binary`)
+//! Little-endian. A matrix is `int64 rows, int64 cols`, then `rows·cols` `float32` in
+//! column-major order; a vector is `int64 length`, then `length` `float32`. A prior directory
+//! holds `mu` (the 20-vector mean), `thumb/P`, `thumb/Sigma`, `fingers/P`, `fingers/Sigma`
+//! (and unused `Limits`, htrack's joint 20×20 `P`/`Sigma`). `P` has orthonormal principal
+//! directions as columns; `Sigma` is `diag(variances)` of the latent coordinates.
+//!
+//! # What the 20 entries index
+//! `y = θ[9..29) − μ` of the originals' pose vector: thumb `[abd, flex1, flex2, flex3]`, then
+//! index, middle, ring, pinky, each `[abd, flex1, flex2, flex3]`; `thumb/` acts on `y[0..4)`,
+//! `fingers/` on `y[4..20)`.
+//!
+//! # Conventions
+//! A [`PcaPrior`] is stored in **this crate's** conventions, with DOF names, so it maps onto
+//! any skeleton that has those DOFs (the cylinder model and the sphere-mesh templates both do).
+//! - **htrack** (`htrack-pose-space-pca`): negative flexion toward the palm and positive
+//!   abduction toward the little finger — the opposite of ours on every articulation DOF. The
+//!   loader maps entry `i` to [`crate::cylinder::HTRACK_THETA_LAYOUT`]`[6 + i]` (our name,
+//!   sign −1): `μ ← −μ`, rows of `P` negated (`P ← S·P`, `S = −I`, still orthonormal), variances
+//!   unchanged. So `thumb_cmc_abd, thumb_cmc_flex, thumb_mcp_flex, thumb_ip_flex,
+//!   index_mcp_abd, index_mcp_flex, index_pip_flex, index_dip_flex, middle_…, ring_…, pinky_…`
+//!   ← `−htrack[9..29)`. (The abduction sign follows the htrack importer of
+//!   [`crate::cylinder`]; the flexion sign is the documented negative-flexion convention.)
+//! - **hmodel/honline** (`hmodel-pose-space`): positive flexion, same signs as ours; names from
+//!   [`crate::spheremesh::HONLINE_THETA_DOFS`]`[9..29)`, sign +1.
+//!
+//! The priors were learned on the originals' skeletons, whose rest frames differ from ours; a
+//! prior transfers as "the same joint angles are likely", not as identical geometry.
+
+use std::path::Path;
+
+use nalgebra::{DMatrix, DVector};
+
+use crate::cylinder::HTRACK_THETA_LAYOUT;
+use crate::error::{ModelError, Result};
+use crate::spheremesh::HONLINE_THETA_DOFS;
+
+/// Latent dimensions htrack uses per group (`latent_size` 3 for thumb and fingers).
+pub const HTRACK_LATENT_DIMS: usize = 3;
+/// Latent dimensions hmodel/honline use per group (their files hold exactly 2).
+pub const HMODEL_LATENT_DIMS: usize = 2;
+
+/// One PCA group (thumb or fingers) over named DOFs, in this crate's sign conventions.
+#[derive(Clone, Debug, PartialEq)]
+pub struct PcaGroup {
+    /// `"thumb"` or `"fingers"` for the original files.
+    pub name: String,
+    /// The k DOF names the group acts on, in the order of `mean` and of the rows of `basis`.
+    pub dofs: Vec<String>,
+    /// μ (k).
+    pub mean: Vec<f64>,
+    /// `Π_P` (k × m): principal directions as columns (orthonormal in the original data).
+    pub basis: DMatrix<f64>,
+    /// Variances of the m latent coordinates (the eigenvalues; Eq. 2.6's `Σ` is
+    /// `diag(1/√variance)`).
+    pub variances: Vec<f64>,
+}
+
+impl PcaGroup {
+    /// Number of DOFs k.
+    pub fn num_dofs(&self) -> usize {
+        self.dofs.len()
+    }
+
+    /// Number of latent dimensions m.
+    pub fn num_latent(&self) -> usize {
+        self.variances.len()
+    }
+
+    /// Keep at most `m` latent dimensions (the leading columns).
+    pub fn truncate(&mut self, m: usize) {
+        let m = m.min(self.num_latent());
+        self.basis = self.basis.columns(0, m).into_owned();
+        self.variances.truncate(m);
+    }
+
+    /// `max |PᵀP − I|`: how far the basis is from orthonormal.
+    pub fn orthonormality_error(&self) -> f64 {
+        let m = self.num_latent();
+        let g = self.basis.transpose() * &self.basis - DMatrix::<f64>::identity(m, m);
+        g.amax()
+    }
+}
+
+/// A pose-space PCA prior: independent groups over named articulation DOFs.
+#[derive(Clone, Debug, PartialEq)]
+pub struct PcaPrior {
+    /// The groups (thumb, fingers for the original files).
+    pub groups: Vec<PcaGroup>,
+}
+
+impl PcaPrior {
+    /// Load an htrack prior directory (`mu`, `thumb/{P,Sigma}`, `fingers/{P,Sigma}`), converting
+    /// htrack's negative-flexion convention to ours (module docs).
+    pub fn load_htrack_dir(dir: &Path) -> Result<Self> {
+        let map: Vec<(&str, f64)> = HTRACK_THETA_LAYOUT[6..]
+            .iter()
+            .map(|&(_, name, sign)| (name, sign))
+            .collect();
+        Self::load_dir(dir, &map)
+    }
+
+    /// Load an hmodel/honline prior directory (positive flexion: no sign change).
+    pub fn load_hmodel_dir(dir: &Path) -> Result<Self> {
+        let map: Vec<(&str, f64)> = HONLINE_THETA_DOFS[9..29]
+            .iter()
+            .map(|name| (name.unwrap_or("unused"), 1.0))
+            .collect();
+        Self::load_dir(dir, &map)
+    }
+
+    /// Load `dir` with the 20 entries of `mu` named and signed by `map` (`ours = sign · file`).
+    fn load_dir(dir: &Path, map: &[(&str, f64)]) -> Result<Self> {
+        let mu = read_htrack_vector(&dir.join("mu"))?;
+        if mu.len() != map.len() {
+            return Err(ModelError::field(
+                dir.join("mu"),
+                "length",
+                None,
+                format!("{} entries, expected {}", mu.len(), map.len()),
+            ));
+        }
+        let mut groups = Vec::with_capacity(2);
+        for (name, range) in [("thumb", 0..4), ("fingers", 4..20)] {
+            let p_path = dir.join(name).join("P");
+            let s_path = dir.join(name).join("Sigma");
+            let p = read_htrack_matrix(&p_path)?;
+            let s = read_htrack_matrix(&s_path)?;
+            let k = range.len();
+            if p.nrows() != k || p.ncols() == 0 || p.ncols() > k {
+                return Err(ModelError::field(
+                    &p_path,
+                    "shape",
+                    None,
+                    format!(
+                        "{}×{}, expected {k}×m with 1 ≤ m ≤ {k}",
+                        p.nrows(),
+                        p.ncols()
+                    ),
+                ));
+            }
+            let m = p.ncols();
+            if s.nrows() < m || s.ncols() < m {
+                return Err(ModelError::field(
+                    &s_path,
+                    "shape",
+                    None,
+                    format!("{}×{}, expected at least {m}×{m}", s.nrows(), s.ncols()),
+                ));
+            }
+            let variances: Vec<f64> = (0..m).map(|i| s[(i, i)]).collect();
+            let signs: Vec<f64> = map[range.clone()].iter().map(|&(_, s)| s).collect();
+            let mut basis = p;
+            for (i, &sg) in signs.iter().enumerate() {
+                basis.row_mut(i).scale_mut(sg);
+            }
+            groups.push(PcaGroup {
+                name: name.into(),
+                dofs: map[range.clone()]
+                    .iter()
+                    .map(|&(n, _)| n.to_string())
+                    .collect(),
+                mean: range.clone().zip(&signs).map(|(i, s)| s * mu[i]).collect(),
+                basis,
+                variances,
+            });
+        }
+        let prior = Self { groups };
+        prior.validate(dir)?;
+        Ok(prior)
+    }
+
+    /// Keep at most `m` latent dimensions per group.
+    pub fn truncated(&self, m: usize) -> Self {
+        let mut out = self.clone();
+        out.groups.iter_mut().for_each(|g| g.truncate(m));
+        out
+    }
+
+    /// Check shapes and numbers: per group k = |dofs| = |mean| = rows of P, m = cols of P =
+    /// |variances| with 1 ≤ m ≤ k, unique non-empty DOF names across groups, finite values,
+    /// positive variances. `source` names the data for messages.
+    pub fn validate(&self, source: &Path) -> Result<()> {
+        let mut seen: Vec<&str> = vec![];
+        for (gi, g) in self.groups.iter().enumerate() {
+            let bad = |reason: String| Err(ModelError::field(source, "groups", Some(gi), reason));
+            let (k, m) = (g.dofs.len(), g.variances.len());
+            if k == 0 || g.mean.len() != k || g.basis.nrows() != k {
+                return bad(format!(
+                    "group `{}`: {} DOFs, {} means, {} basis rows",
+                    g.name,
+                    k,
+                    g.mean.len(),
+                    g.basis.nrows()
+                ));
+            }
+            if m == 0 || m > k || g.basis.ncols() != m {
+                return bad(format!(
+                    "group `{}`: {} variances for a basis with {} columns over {k} DOFs",
+                    g.name,
+                    m,
+                    g.basis.ncols()
+                ));
+            }
+            if !(g.mean.iter().chain(g.basis.iter()).all(|v| v.is_finite())) {
+                return bad(format!("group `{}`: non-finite mean or basis", g.name));
+            }
+            if !g.variances.iter().all(|v| v.is_finite() && *v > 0.0) {
+                return bad(format!("group `{}`: variances must be positive", g.name));
+            }
+            for d in &g.dofs {
+                if d.is_empty() || seen.contains(&d.as_str()) {
+                    return bad(format!("group `{}`: empty or repeated DOF `{d}`", g.name));
+                }
+                seen.push(d);
+            }
+        }
+        Ok(())
+    }
+}
+
+fn read_bytes(path: &Path) -> Result<Vec<u8>> {
+    std::fs::read(path).map_err(|source| ModelError::Io {
+        file: path.to_path_buf(),
+        source,
+    })
+}
+
+fn header(bytes: &[u8], at: usize, source: &Path) -> Result<usize> {
+    let raw: [u8; 8] = bytes
+        .get(at..at + 8)
+        .and_then(|s| s.try_into().ok())
+        .ok_or_else(|| ModelError::Parse {
+            file: source.to_path_buf(),
+            reason: "truncated size header".into(),
+        })?;
+    let v = i64::from_le_bytes(raw);
+    if !(0..=1 << 24).contains(&v) {
+        return Err(ModelError::Parse {
+            file: source.to_path_buf(),
+            reason: format!("implausible size {v}"),
+        });
+    }
+    Ok(v as usize)
+}
+
+fn floats(bytes: &[u8], count: usize, source: &Path) -> Result<Vec<f64>> {
+    if bytes.len() != count * 4 {
+        return Err(ModelError::Parse {
+            file: source.to_path_buf(),
+            reason: format!("{} payload bytes, expected {}", bytes.len(), count * 4),
+        });
+    }
+    let vals: Vec<f64> = bytes
+        .chunks_exact(4)
+        .map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]]) as f64)
+        .collect();
+    if let Some(i) = vals.iter().position(|v| !v.is_finite()) {
+        return Err(ModelError::Parse {
+            file: source.to_path_buf(),
+            reason: format!("value {i} is not finite"),
+        });
+    }
+    Ok(vals)
+}
+
+/// Parse an htrack binary matrix (`int64 rows, int64 cols`, float32 column-major).
+pub fn parse_htrack_matrix(bytes: &[u8], source: &Path) -> Result<DMatrix<f64>> {
+    let rows = header(bytes, 0, source)?;
+    let cols = header(bytes, 8, source)?;
+    let count = rows.checked_mul(cols).ok_or_else(|| ModelError::Parse {
+        file: source.to_path_buf(),
+        reason: "size overflow".into(),
+    })?;
+    let vals = floats(&bytes[16..], count, source)?;
+    Ok(DMatrix::from_vec(rows, cols, vals))
+}
+
+/// Parse an htrack binary vector (`int64 length`, float32 values).
+pub fn parse_htrack_vector(bytes: &[u8], source: &Path) -> Result<DVector<f64>> {
+    let len = header(bytes, 0, source)?;
+    let vals = floats(&bytes[8..], len, source)?;
+    Ok(DVector::from_vec(vals))
+}
+
+/// Read an htrack binary matrix file.
+pub fn read_htrack_matrix(path: &Path) -> Result<DMatrix<f64>> {
+    parse_htrack_matrix(&read_bytes(path)?, path)
+}
+
+/// Read an htrack binary vector file.
+pub fn read_htrack_vector(path: &Path) -> Result<DVector<f64>> {
+    parse_htrack_vector(&read_bytes(path)?, path)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const HTRACK: &str = concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../../shared/reference/htrack-pose-space-pca"
+    );
+    const HMODEL: &str = concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../../shared/reference/hmodel-pose-space"
+    );
+
+    fn present(dir: &str) -> bool {
+        if Path::new(dir).is_dir() {
+            true
+        } else {
+            eprintln!("skipped: {dir} absent");
+            false
+        }
+    }
+
+    fn close(a: f64, b: f64) -> bool {
+        (a - b).abs() < 2e-6
+    }
+
+    #[test]
+    fn parses_and_refuses_malformed_bytes() {
+        let src = Path::new("<memory>");
+        let mut b = vec![];
+        b.extend_from_slice(&2i64.to_le_bytes());
+        b.extend_from_slice(&1i64.to_le_bytes());
+        b.extend_from_slice(&1.5f32.to_le_bytes());
+        b.extend_from_slice(&(-2.0f32).to_le_bytes());
+        let m = parse_htrack_matrix(&b, src).unwrap();
+        assert_eq!((m.nrows(), m.ncols()), (2, 1));
+        assert_eq!(m[(1, 0)], -2.0);
+        assert!(parse_htrack_matrix(&b[..b.len() - 1], src).is_err());
+        assert!(parse_htrack_matrix(&b[..10], src).is_err());
+        let mut neg = b.clone();
+        neg[..8].copy_from_slice(&(-1i64).to_le_bytes());
+        assert!(parse_htrack_matrix(&neg, src).is_err());
+        let mut nan = b.clone();
+        nan[16..20].copy_from_slice(&f32::NAN.to_le_bytes());
+        assert!(parse_htrack_matrix(&nan, src).is_err());
+        let v = parse_htrack_vector(&b[8..], src);
+        assert!(v.is_err(), "1 then 2 floats is not a vector of length 1");
+    }
+
+    #[test]
+    fn htrack_files_load_with_anchor_values() {
+        if !present(HTRACK) {
+            return;
+        }
+        let dir = Path::new(HTRACK);
+        // Raw files: sizes of ANCHOR-FACTS §4.
+        let mu = read_htrack_vector(&dir.join("mu")).unwrap();
+        assert_eq!(mu.len(), 20);
+        for (i, v) in [
+            (0, 0.085593),
+            (1, -0.445539),
+            (5, -0.247644),
+            (19, -0.289409),
+        ] {
+            assert!(close(mu[i], v), "mu[{i}] = {}", mu[i]);
+        }
+        let p20 = read_htrack_matrix(&dir.join("P")).unwrap();
+        assert_eq!((p20.nrows(), p20.ncols()), (20, 20));
+        let s20 = read_htrack_matrix(&dir.join("Sigma")).unwrap();
+        assert!((s20[(0, 0)] - 2.266).abs() < 1e-3);
+        let tp = read_htrack_matrix(&dir.join("thumb/P")).unwrap();
+        assert_eq!((tp.nrows(), tp.ncols()), (4, 4));
+        for (r, row) in [
+            (0, [-0.150154, -0.420226, -0.894908]),
+            (3, [0.771612, 0.392173, -0.312886]),
+        ] {
+            for c in 0..3 {
+                assert!(close(tp[(r, c)], row[c]), "thumb P[{r},{c}]");
+            }
+        }
+        let fp = read_htrack_matrix(&dir.join("fingers/P")).unwrap();
+        assert_eq!((fp.nrows(), fp.ncols()), (16, 16));
+        assert!(close(fp[(1, 1)], -0.314745));
+        assert!(close(fp[(15, 2)], -0.267405));
+        let lim = read_htrack_matrix(&dir.join("Limits")).unwrap();
+        assert_eq!((lim.nrows(), lim.ncols()), (2, 2));
+
+        // Converted prior: our names and signs.
+        let prior = PcaPrior::load_htrack_dir(dir).unwrap();
+        let [thumb, fingers] = &prior.groups[..] else {
+            panic!("two groups")
+        };
+        assert_eq!(thumb.dofs[0], "thumb_cmc_abd");
+        assert_eq!(thumb.dofs[3], "thumb_ip_flex");
+        assert_eq!(fingers.dofs[0], "index_mcp_abd");
+        assert_eq!(fingers.dofs[1], "index_mcp_flex");
+        assert_eq!(fingers.dofs[15], "pinky_dip_flex");
+        assert_eq!((thumb.num_dofs(), thumb.num_latent()), (4, 4));
+        assert_eq!((fingers.num_dofs(), fingers.num_latent()), (16, 16));
+        assert!(close(thumb.mean[1], 0.445539), "flexion sign flipped");
+        assert!(close(fingers.mean[2], 0.376956));
+        assert!(close(thumb.basis[(0, 0)], 0.150154));
+        // (ANCHOR-FACTS lists the 4th as 0.009127; the file holds 0.0090923.)
+        let tv = [0.235249, 0.081992, 0.019017, 0.009092];
+        for (v, e) in thumb.variances.iter().zip(tv) {
+            assert!(close(*v, e));
+        }
+        assert!((fingers.variances[0] - 2.190982).abs() < 1e-5);
+        assert!(thumb.orthonormality_error() < 1e-5);
+        assert!(fingers.orthonormality_error() < 1e-5);
+        let t3 = prior.truncated(HTRACK_LATENT_DIMS);
+        assert_eq!(t3.groups[1].basis.ncols(), 3);
+        assert_eq!(t3.groups[1].variances.len(), 3);
+    }
+
+    #[test]
+    fn hmodel_files_load_with_anchor_values() {
+        if !present(HMODEL) {
+            return;
+        }
+        let prior = PcaPrior::load_hmodel_dir(Path::new(HMODEL)).unwrap();
+        let (thumb, fingers) = (&prior.groups[0], &prior.groups[1]);
+        assert_eq!(
+            (thumb.num_dofs(), thumb.num_latent()),
+            (4, HMODEL_LATENT_DIMS)
+        );
+        assert_eq!((fingers.num_dofs(), fingers.num_latent()), (16, 2));
+        assert!(close(thumb.mean[0], 0.585766));
+        assert!(close(fingers.mean[2], 1.478608));
+        assert!(close(thumb.basis[(2, 0)], -0.781745));
+        assert!(close(fingers.basis[(3, 1)], 0.575425));
+        assert!(close(thumb.variances[1], 0.202641));
+        assert!(close(fingers.variances[0], 2.105993));
+        assert_eq!(fingers.dofs[4], "middle_mcp_abd");
+    }
+}
