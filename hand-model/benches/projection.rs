@@ -76,6 +76,17 @@ fn bench_projection(c: &mut Criterion) {
 
     let mut group = c.benchmark_group("projection_2500");
     group.throughput(Throughput::Elements(POINTS as u64));
+    // Baseline measured in the same run: every element's closed-form projection, no culling
+    // (the thesis' "brute force" over the 30 elements).
+    group.bench_function("baseline_all_elements", |b| {
+        b.iter(|| {
+            for (p, o) in black_box(&points).iter().zip(out.iter_mut()) {
+                *o = (0..elements.len())
+                    .filter_map(|e| geometry.project_on_element(e, p))
+                    .min_by(|a, b| a.distance.total_cmp(&b.distance));
+            }
+        })
+    });
     group.bench_function("plain", |b| {
         b.iter(|| geometry.project_points(black_box(&points), black_box(&mut out)))
     });
