@@ -42,10 +42,10 @@ pub fn visible_surface_points(
     let mut pad = 0.0f64;
     for (i, s) in model.segments.iter().enumerate() {
         pad = pad.max(s.r1.max(s.r2).max(s.r1y).max(s.r2y));
-        for p in [model.segment_start(posed, i), model.segment_end(posed, i)]
-            .into_iter()
-            .flatten()
-        {
+        for p in [model.segment_start(posed, i), model.segment_end(posed, i)] {
+            let Some(p) = p.filter(|p| p.iter().all(|v| v.is_finite())) else {
+                return out;
+            };
             lo = lo.inf(&p);
             hi = hi.sup(&p);
         }
@@ -70,8 +70,14 @@ pub fn visible_surface_points(
         vmax = vmax.max(v);
     }
     let clamp = |x: f64, n: u32| x.clamp(0.0, f64::from(n.saturating_sub(1))) as u32;
-    let (u0, u1) = (clamp(umin.floor(), camera.width), clamp(umax.ceil(), camera.width));
-    let (v0, v1) = (clamp(vmin.floor(), camera.height), clamp(vmax.ceil(), camera.height));
+    let (u0, u1) = (
+        clamp(umin.floor(), camera.width),
+        clamp(umax.ceil(), camera.width),
+    );
+    let (v0, v1) = (
+        clamp(vmin.floor(), camera.height),
+        clamp(vmax.ceil(), camera.height),
+    );
     for v in (v0..=v1).step_by(stride as usize) {
         for u in (u0..=u1).step_by(stride as usize) {
             let ray = camera.pixel_ray(f64::from(u), f64::from(v));

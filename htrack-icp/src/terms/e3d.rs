@@ -101,11 +101,7 @@ impl EnergyTerm<TrackingCtx<'_>> for E3d {
                 *slot = (d, c.normal.dot(&posed.column(d, &c.point)));
             }
             ne.add_row(&cols[..chain.len()], r, omega * w)?;
-            let energy = if reweighted {
-                irls.penalty(r)
-            } else {
-                r * r
-            };
+            let energy = if reweighted { irls.penalty(r) } else { r * r };
             stats += TermStats {
                 energy: omega * energy,
                 rows: 1,
