@@ -171,6 +171,10 @@ fn e3d_gradient_matches_finite_differences() {
         let cmp =
             check_gradient(sk, &pose, sk.num_dofs(), &term, &mut ctx, &mut update, 1e-6).unwrap();
         let rel = cmp.relative_error(1e-9);
+        eprintln!(
+            "E3D gradient, rigid = {rigid}, {} points: relative error {rel:.2e}",
+            points.len()
+        );
         assert!(ctx.reweighted() != rigid);
         assert!(
             rel < 1e-4,
@@ -254,24 +258,28 @@ fn context_reuses_its_buffers_and_survives_bad_input() {
     assert!(ctx.correspondences().iter().all(Option::is_none));
 }
 
-#[test]
-fn lm_recovers_a_perturbed_pose_from_a_synthetic_cloud() {
+/// LM from the perturbed pose on the ray-marched cloud of the target pose (4282 points at
+/// stride 1): thesis defaults — 1 rigid + `iterations − 1` full iterations (§2.4), λ = 100
+/// (§2.7.5) as the Damping term, joint limits ω₇ = 1e7, ω₁ = 1, orthographic front-facing test
+/// (§2.3.1). Returns the pose, the report and the mean/max keypoint errors before and after.
+fn solve_synthetic(
+    iterations: usize,
+) -> (Pose, hand_model::solver::LmReport, (f64, f64), (f64, f64)) {
     let model = default_right_hand_cylinders();
     let sk = &model.skeleton;
     let target = target_pose(&model);
     let points = visible_surface_points(&model, &model.posed(&target).unwrap(), &camera(), 1, 0.5);
+    assert!(points.len() > 3000, "{} points", points.len());
     let start = perturbed_pose(&model, &target);
-
-    // Thesis defaults: 7 iterations, the first rigid-only (§2.4), λ = 100 (§2.7.5) as the
-    // Damping term, joint limits ω₇ = 1e7, ω₁ = 1, orthographic front-facing test (§2.3.1).
     let e3d = E3d::default();
     let limits = JointLimits::new(sk, &JointLimitsParams::default());
     let damping = Damping::new(sk, 0, &DampingParams::default()).unwrap();
     let options = LmOptions {
+        iterations,
+        rigid_iterations: 1,
         damping: DampingParams::none(),
         ..LmOptions::default()
     };
-    assert_eq!((options.iterations, options.rigid_iterations), (7, 1));
     let solver = LmSolver::new(sk, 0, options).unwrap();
     let mut ws = solver.workspace();
     let mut ctx = TrackingCtx::new(&model, View::Orthographic, IrlsParams::default());
@@ -292,8 +300,8 @@ fn lm_recovers_a_perturbed_pose_from_a_synthetic_cloud() {
     let before = keypoint_error(&model, &start, &target);
     let after = keypoint_error(&model, &pose, &target);
     eprintln!(
-        "{} points; keypoint error mean/max before {:.2}/{:.2} mm, after {:.3}/{:.3} mm; \
-         energy {:.1} -> {:.3}; {:?}",
+        "{iterations} iterations, {} points: keypoint error mean/max before {:.2}/{:.2} mm, \
+         after {:.4}/{:.4} mm; energy {:.1} -> {:.3}; {:?}",
         points.len(),
         before.0,
         before.1,
@@ -304,6 +312,18 @@ fn lm_recovers_a_perturbed_pose_from_a_synthetic_cloud() {
         report.termination
     );
     assert!(report.termination.was_successful());
-    assert_eq!(report.iterations, 7);
+    assert_eq!(report.iterations, iterations);
+    (pose, report, before, after)
+}
+
+#[test]
+fn lm_recovers_a_perturbed_pose_from_a_synthetic_cloud() {
+    // One frame's solve with the thesis' 7 iterations: most of the way (the distal pinky
+    // phalanx, caught by wrong correspondences at the start, lags behind).
+    let (_, _, before, after) = solve_synthetic(7);
+    assert!(before.0 > 15.0);
     assert!(after.0 < 0.1 * before.0 && after.0 < 2.0, "{after:?}");
+    // Iterated further, the pose is recovered exactly (the data are noise-free).
+    let (_, _, _, after) = solve_synthetic(30);
+    assert!(after.1 < 1e-3, "{after:?}");
 }

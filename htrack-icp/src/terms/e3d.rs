@@ -37,8 +37,12 @@ const MAX_CHAIN: usize = 64;
 /// form), and the reported energy is `ω₁ Σ ρ_ε(r)` (= `ω₁ Σ‖x − y‖` for closest-point
 /// correspondences, Eq. 2.2); on the rigid iteration reweighting is off (htrack, ANCHOR-FACTS
 /// §5.3), `w = 1` and the energy is the point-to-plane least squares `ω₁ Σ r²`. Either way
-/// `−2b` is the exact gradient of the reported energy, which the tests check by finite
-/// differences.
+/// `−2b` is the gradient of the reported energy wherever `n ∥ x − y`, which the tests check by
+/// finite differences: on the circular segments (closest points, envelope theorem, §2.7.4's
+/// `f(x)ᵀJ(x) = f(x)ᵀ`). Two exceptions, as in htrack: on the elliptical palm the foot point is
+/// htrack's approximation (not the closest point, see [`hand_model::cylinder::query`]) and for
+/// a silhouette substitute `y − x` is not along `n`; there the row is the Gauss–Newton row of
+/// the plane through `y` held fixed, not the exact derivative of `nᵀ(y − x)`.
 #[derive(Clone, Debug, PartialEq)]
 pub struct E3d {
     params: E3dParams,
