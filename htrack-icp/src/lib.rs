@@ -1,6 +1,29 @@
 //! # htrack-icp — robust articulated ICP with a cylinder model (thesis Ch. 2)
 //!
-//! Not built yet (issue 4). This crate will hold the energy terms of Tagliasacchi et al. 2015
-//! (E3D with l1 IRLS and front-facing correspondences, E2D silhouette, wrist, PCA pose prior,
-//! collisions, joint limits, temporal prior) and the Levenberg–Marquardt loop with a rigid-first
-//! iteration, on the cylinder model and kinematics of `hand-model`.
+//! The tracker of Tagliasacchi et al. 2015 (thesis Ch. 2) on the cylinder model and kinematics
+//! of `hand-model`, solved by the shared Levenberg–Marquardt solver (Eq. 2.11) with a
+//! rigid-first iteration.
+//!
+//! - [`TrackingCtx`]: the per-iteration context (posed model, sensor points, front-facing
+//!   correspondences of §2.3.1, IRLS weights of §2.7.4), refreshed by
+//!   [`CorrespondenceCallback`];
+//! - [`terms::E3d`]: the point cloud alignment term (Eq. 2.2) as point-to-plane rows with ℓ1
+//!   IRLS weights ([`IrlsParams`]);
+//! - [`distance_transform`]: the Felzenszwalb–Huttenlocher distance transform of the sensor
+//!   silhouette (the projection `Π_{𝒮_s}` of Eq. 2.3);
+//! - [`synthetic`]: ray-marched point clouds of the posed model for tests.
+//!
+//! Not built yet: E2D (Eq. 2.3; needs the cylinder silhouette rasterizer), the wrist term (Eq. 2.4) and collisions (Eq. 2.7).
+//! The priors (joint limits, damping, temporal, PCA pose prior) are the shared terms of
+//! [`hand_model::solver::terms`], which run on [`TrackingCtx`] through
+//! [`hand_model::solver::PoseContext`].
+
+mod context;
+pub mod distance_transform;
+pub mod synthetic;
+pub mod terms;
+
+#[cfg(test)]
+mod tests;
+
+pub use context::{CorrespondenceCallback, IrlsParams, TrackingCtx};

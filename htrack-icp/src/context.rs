@@ -1,0 +1,259 @@
+//! The per-iteration context of the Ch. 2 tracker (STYLE practice 5): the posed cylinder model,
+//! the sensor points and their front-facing correspondences (thesis §2.3.1 "3D
+//! correspondences") with one IRLS weight each (§2.7.4 "Point cloud alignment").
+
+use hand_model::cylinder::{CylinderModel, CylinderProjection, View};
+use hand_model::kinematics::{Pose, PosedSkeleton, Skeleton};
+use hand_model::solver::{IterInfo, LmCallback, PoseContext, TermError};
+use nalgebra::Vector3;
+use serde::{Deserialize, Serialize};
+
+/// How the ℓ1 norm of Eq. 2.2 is approximated by iteratively re-weighted least squares
+/// (thesis §2.7.4: `ω_re = 1/‖d‖`; htrack reweights with `3.5/√(d + 1e−3)`, ANCHOR-FACTS §5.3).
+///
+/// With the point-to-plane residual `r = nᵀ(y − x)` the term minimizes the Huber-smoothed ℓ1
+/// energy `ρ_ε(r) = |r|` for `|r| ≥ ε`, `r²/(2ε) + ε/2` below, whose IRLS weight is
+/// `w = ρ'(r)/(2r) = 1 / (2·max(|r|, ε))`. With that weight the quadratic surrogate
+/// `w·(r + Jδ)² + const` has exactly the value and the gradient of `ρ_ε` at the linearization
+/// point, so the linearization is finite-difference checkable and the reported energy is
+/// `Σ‖x − y‖` (Eq. 2.2) whenever `n ∥ x − y` (every closest-point correspondence). The thesis'
+/// `ω_re = 1/‖d‖` is twice this weight (its surrogate matches the value but doubles the
+/// gradient); that factor is a rescaling of ω₁. `ε` avoids the division by zero of
+/// `1/‖d‖` (htrack skips reweighting below `d = 1e−3` mm).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct IrlsParams {
+    /// Reweight at all (false: plain point-to-plane least squares `Σ r²` on every iteration).
+    pub reweight: bool,
+    /// Also reweight on rigid-only iterations (htrack `fit3D_reweight_rigid`, off: "allows fast
+    /// rigid motion", ANCHOR-FACTS §5.3).
+    pub reweight_rigid: bool,
+    /// Huber threshold ε (mm) below which the ℓ1 norm is replaced by a quadratic.
+    pub epsilon: f64,
+}
+
+impl Default for IrlsParams {
+    fn default() -> Self {
+        Self {
+            reweight: true,
+            reweight_rigid: false,
+            epsilon: 1e-3,
+        }
+    }
+}
+
+impl IrlsParams {
+    /// The Huber-ℓ1 penalty `ρ_ε(r)` whose IRLS weight is [`IrlsParams::weight`].
+    #[inline]
+    pub fn penalty(&self, r: f64) -> f64 {
+        let a = r.abs();
+        let eps = self.eps();
+        if a >= eps {
+            a
+        } else {
+            r * r / (2.0 * eps) + eps / 2.0
+        }
+    }
+
+    /// The IRLS weight `w = 1/(2·max(|r|, ε))` of [`IrlsParams::penalty`].
+    #[inline]
+    pub fn weight(&self, r: f64) -> f64 {
+        1.0 / (2.0 * r.abs().max(self.eps()))
+    }
+
+    /// ε, made positive and finite so that no weight divides by zero.
+    #[inline]
+    fn eps(&self) -> f64 {
+        if self.epsilon.is_finite() && self.epsilon > 1e-12 {
+            self.epsilon
+        } else {
+            1e-12
+        }
+    }
+}
+
+/// The shared per-iteration state of the Ch. 2 tracker: the cylinder model, the current pose θ
+/// and its forward kinematics, the sensor point cloud `𝒳_s` (camera frame, mm), for every point
+/// its front-facing correspondence `y = Π_M(x, θ)` (§2.3.1) and its IRLS weight (§2.7.4).
+///
+/// Refreshed by [`TrackingCtx::update`] (called by [`CorrespondenceCallback`] before every LM
+/// iteration); nothing allocates once the buffers have held the current number of points.
+#[derive(Clone, Debug)]
+pub struct TrackingCtx<'m> {
+    model: &'m CylinderModel,
+    pose: Pose,
+    posed: PosedSkeleton,
+    points: Vec<Vector3<f64>>,
+    correspondences: Vec<Option<CylinderProjection>>,
+    residuals: Vec<f64>,
+    weights: Vec<f64>,
+    reweighted: bool,
+    rigid_only: bool,
+    view: View,
+    irls: IrlsParams,
+}
+
+impl<'m> TrackingCtx<'m> {
+    /// A context at the rest pose with no points; `view` is the camera model of the
+    /// front-facing test (the thesis uses [`View::Orthographic`], `v = (0, 0, 1)`).
+    pub fn new(model: &'m CylinderModel, view: View, irls: IrlsParams) -> Self {
+        let pose = Pose::zeros(&model.skeleton);
+        Self {
+            model,
+            posed: PosedSkeleton::new(&model.skeleton, &pose),
+            pose,
+            points: Vec::new(),
+            correspondences: Vec::new(),
+            residuals: Vec::new(),
+            weights: Vec::new(),
+            reweighted: false,
+            rigid_only: false,
+            view,
+            irls,
+        }
+    }
+
+    /// Replace the sensor points `𝒳_s` (camera frame, mm); keeps the buffers' capacity. The
+    /// correspondences are stale until the next [`TrackingCtx::update`].
+    pub fn set_points(&mut self, points: &[Vector3<f64>]) {
+        self.points.clear();
+        self.points.extend_from_slice(points);
+        self.correspondences.clear();
+        self.correspondences.resize(points.len(), None);
+        self.residuals.clear();
+        self.residuals.resize(points.len(), 0.0);
+        self.weights.clear();
+        self.weights.resize(points.len(), 0.0);
+    }
+
+    /// Re-pose the model at `pose`, recompute every front-facing correspondence `y` (§2.3.1),
+    /// its point-to-plane residual `r = nᵀ(y − x)` and its IRLS weight (§2.7.4; 1 when the
+    /// iteration is not reweighted, see [`IrlsParams`]). A pose of the wrong length is an error;
+    /// a non-finite pose value makes every correspondence `None`.
+    pub fn update(&mut self, pose: &Pose, rigid_only: bool) -> Result<(), TermError> {
+        let nd = self.model.skeleton.num_dofs();
+        if pose.values.len() != nd {
+            return Err(TermError::ShapeMismatch {
+                expected: nd,
+                found: pose.values.len(),
+            });
+        }
+        self.pose.values.clone_from(&pose.values);
+        self.rigid_only = rigid_only;
+        self.reweighted = self.irls.reweight && (!rigid_only || self.irls.reweight_rigid);
+        if !pose.values.iter().all(|v| v.is_finite()) {
+            self.correspondences.fill(None);
+            return Ok(());
+        }
+        self.posed.update(&self.model.skeleton, &self.pose);
+        if self
+            .model
+            .project_points(
+                &self.posed,
+                &self.points,
+                Some(self.view),
+                &mut self.correspondences,
+            )
+            .is_err()
+        {
+            return Err(TermError::Failed("correspondence buffer size mismatch"));
+        }
+        for ((c, x), (r, w)) in self
+            .correspondences
+            .iter()
+            .zip(&self.points)
+            .zip(self.residuals.iter_mut().zip(self.weights.iter_mut()))
+        {
+            (*r, *w) = match c {
+                Some(c) => {
+                    let res = c.normal.dot(&(c.point - x));
+                    let weight = if self.reweighted {
+                        self.irls.weight(res)
+                    } else {
+                        1.0
+                    };
+                    (res, weight)
+                }
+                None => (0.0, 0.0),
+            };
+        }
+        Ok(())
+    }
+
+    /// The cylinder model.
+    pub fn model(&self) -> &'m CylinderModel {
+        self.model
+    }
+
+    /// The sensor points `𝒳_s`.
+    pub fn points(&self) -> &[Vector3<f64>] {
+        &self.points
+    }
+
+    /// Per point its front-facing correspondence `y = Π_M(x, θ)` (§2.3.1), `None` when there
+    /// is none (non-finite point).
+    pub fn correspondences(&self) -> &[Option<CylinderProjection>] {
+        &self.correspondences
+    }
+
+    /// Per point the point-to-plane residual `r = nᵀ(y − x)` (0 without correspondence).
+    pub fn residuals(&self) -> &[f64] {
+        &self.residuals
+    }
+
+    /// Per point the IRLS weight `w` (§2.7.4; see [`IrlsParams`]); 1 on non-reweighted
+    /// iterations, 0 without correspondence.
+    pub fn weights(&self) -> &[f64] {
+        &self.weights
+    }
+
+    /// Whether the current weights are IRLS weights (the energy is then the Huber-ℓ1 of
+    /// Eq. 2.2) rather than 1 (the energy is then `Σ r²`).
+    pub fn reweighted(&self) -> bool {
+        self.reweighted
+    }
+
+    /// Whether the current iteration only moves the global DOFs.
+    pub fn rigid_only(&self) -> bool {
+        self.rigid_only
+    }
+
+    /// The IRLS settings.
+    pub fn irls(&self) -> &IrlsParams {
+        &self.irls
+    }
+
+    /// The camera model of the front-facing test.
+    pub fn view(&self) -> View {
+        self.view
+    }
+}
+
+impl PoseContext for TrackingCtx<'_> {
+    fn skeleton(&self) -> &Skeleton {
+        &self.model.skeleton
+    }
+    fn pose(&self) -> &Pose {
+        &self.pose
+    }
+    fn posed(&self) -> &PosedSkeleton {
+        &self.posed
+    }
+}
+
+/// The [`LmCallback`] of the tracker: before every iteration, [`TrackingCtx::update`] at the
+/// current pose (re-pose, front-facing correspondences, IRLS weights; the rigid-only flag from
+/// [`IterInfo`]).
+#[derive(Copy, Clone, Debug, Default)]
+pub struct CorrespondenceCallback;
+
+impl LmCallback<TrackingCtx<'_>> for CorrespondenceCallback {
+    fn prepare(
+        &mut self,
+        pose: &Pose,
+        ctx: &mut TrackingCtx<'_>,
+        info: IterInfo,
+    ) -> Result<(), TermError> {
+        ctx.update(pose, info.rigid_only)
+    }
+}
