@@ -9,17 +9,16 @@
 //!   [`CorrespondenceCallback`];
 //! - [`terms::E3d`]: the point cloud alignment term (Eq. 2.2) as point-to-plane rows with ℓ1
 //!   IRLS weights ([`IrlsParams`]);
-//! - [`distance_transform`]: the Felzenszwalb–Huttenlocher distance transform of the sensor
-//!   silhouette (the projection `Π_{𝒮_s}` of Eq. 2.3);
 //! - [`synthetic`]: ray-marched point clouds of the posed model for tests.
 //!
-//! Not built yet: E2D (Eq. 2.3; needs the cylinder silhouette rasterizer), the wrist term (Eq. 2.4) and collisions (Eq. 2.7).
+//! Not built yet (issue 4): E2D (Eq. 2.3; needs the cylinder silhouette rasterizer and will take
+//! the sensor silhouette's distance transform from `sensor_io::dt`), the wrist term (Eq. 2.4),
+//! collisions (Eq. 2.7), the tracking loop and `hands track`.
 //! The priors (joint limits, damping, temporal, PCA pose prior) are the shared terms of
 //! [`hand_model::solver::terms`], which run on [`TrackingCtx`] through
 //! [`hand_model::solver::PoseContext`].
 
 mod context;
-pub mod distance_transform;
 pub mod synthetic;
 pub mod terms;
 
