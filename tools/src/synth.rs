@@ -69,10 +69,9 @@ pub fn run(args: SynthArgs) -> Result<()> {
     if !(args.fps.is_finite() && args.fps > 0.0 && args.fps <= 1000.0) {
         bail!("--fps must be in (0, 1000], got {}", args.fps);
     }
-    let Some(out) = args.out.as_ref().or(args.preview.as_ref()) else {
+    if args.out.is_none() && args.preview.is_none() {
         bail!("nothing to do: give --out <seq.mcap|folder> and/or --preview sheet.png");
-    };
-    let _ = out;
+    }
     let sensor = SensorModel::by_name(&args.noise).with_context(|| {
         format!(
             "unknown --noise `{}` (one of {})",
