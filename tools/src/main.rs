@@ -10,7 +10,12 @@ use clap::{Parser, Subcommand};
 
 /// Real-time generative hand tracking and hand-model personalization from a depth camera.
 #[derive(Parser)]
-#[command(name = "hands", version, about, long_about = None)]
+#[command(
+    name = "hands",
+    version,
+    about = "Real-time generative hand tracking and hand-model personalization from a depth camera",
+    after_help = "Example: hands demo"
+)]
 struct Cli {
     #[command(subcommand)]
     command: Command,
@@ -19,13 +24,20 @@ struct Cli {
 #[derive(Subcommand)]
 enum Command {
     /// The main job on the embedded default: synthesize, preprocess and score (no input files).
+    #[command(after_help = "Example: hands demo --out out/demo --frames 120")]
     Demo(demo::DemoArgs),
     /// Inspect and export hand templates.
-    #[command(subcommand)]
+    #[command(subcommand, after_help = "Example: hands model show default")]
     Model(model::ModelCommand),
     /// Convert a sequence between the folder format and MCAP.
+    #[command(
+        after_help = "Example: hands convert seq/ seq.mcap   (an .mcap output writes MCAP, any other path a folder)"
+    )]
     Convert(convert::ConvertArgs),
     /// Render a synthetic depth sequence with exact ground truth.
+    #[command(
+        after_help = "Example: hands synth --motion teaser --frames 600 --noise tof --seed 7 --out seq.mcap --preview sheet.png"
+    )]
     Synth(synth::SynthArgs),
 }
 

@@ -24,6 +24,7 @@ pub enum ModelCommand {
     ///
     /// Examples: `hands model show default`, `hands model show me.json`,
     /// `hands model show path/to/hmodel-model-dir` (C/R/B/I.txt), `hands model show default.calib`.
+    #[command(after_help = "Example: hands model show default")]
     Show {
         /// `default`, `default-left`, `default-cylinders`, a template `.json`, an htrack
         /// `.calib`, or a folder with the original hmodel/honline `C.txt R.txt B.txt I.txt`.
@@ -33,6 +34,9 @@ pub enum ModelCommand {
     /// preview rendered by the CPU ray caster.
     ///
     /// Example: `hands model export default --pose fist.json --out hand.glb --png hand.png`
+    #[command(
+        after_help = "Example: hands model export default --pose fist.json --out hand.glb --png hand.png"
+    )]
     Export {
         /// A sphere-mesh template (see `hands model show --help`).
         template: String,
