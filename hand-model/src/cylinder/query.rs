@@ -649,6 +649,51 @@ fn profile_inside(rho: f64, y: f64, a: f64, b: f64, l: f64) -> bool {
     }
 }
 
+/// Per-pose data of one segment for the model-wide queries: its frame and a bounding capsule
+/// (the axis from `start` to `start + axis`, radius `reach`) that contains the whole segment.
+#[derive(Copy, Clone, Debug)]
+struct PosedSeg {
+    /// Index into [`CylinderModel::segments`].
+    index: usize,
+    /// The bone frame.
+    frame: Rigid3,
+    /// World start of the axis (the bone origin).
+    start: Vector3<f64>,
+    /// World axis vector (start → end).
+    axis: Vector3<f64>,
+    /// `1 / ‖axis‖²`, or 0 for a degenerate axis.
+    inv_len2: f64,
+    /// The largest half-axis: every surface point is within `reach` of the axis segment.
+    reach: f64,
+}
+
+/// Segments whose per-pose data fits on the stack (more fall back to a heap buffer).
+const STACK_SEGMENTS: usize = 32;
+
+impl PosedSeg {
+    fn new(seg: &Segment, index: usize, frame: &Rigid3) -> Self {
+        let axis = frame.rotation.column(1) * seg.length;
+        let len2 = axis.norm_squared();
+        PosedSeg {
+            index,
+            frame: *frame,
+            start: frame.translation,
+            axis,
+            inv_len2: if len2 > 0.0 { 1.0 / len2 } else { 0.0 },
+            reach: seg.r1.max(seg.r2).max(seg.r1y).max(seg.r2y),
+        }
+    }
+
+    /// A lower bound of the distance from `p` to the segment surface when `p` is outside the
+    /// bounding capsule (the bound is then positive); ≤ 0 when `p` may be inside the segment.
+    #[inline]
+    fn lower_bound(&self, p: &Vector3<f64>) -> f64 {
+        let d = p - self.start;
+        let t = (d.dot(&self.axis) * self.inv_len2).clamp(0.0, 1.0);
+        (d - self.axis * t).norm() - self.reach
+    }
+}
+
 impl CylinderModel {
     /// Frame of segment `i` in `posed`, when both exist.
     fn frame<'a>(
@@ -660,6 +705,121 @@ impl CylinderModel {
         Some((s, posed.globals.get(s.bone)?))
     }
 
+    /// Run `f` on the per-pose data of every segment whose bone exists in `posed` (in segment
+    /// order), without allocating for models of up to [`STACK_SEGMENTS`] segments.
+    fn with_posed_segments<R>(&self, posed: &PosedSkeleton, f: impl FnOnce(&[PosedSeg]) -> R) -> R {
+        let posed_seg = |(i, s): (usize, &Segment)| {
+            posed
+                .globals
+                .get(s.bone)
+                .map(|frame| PosedSeg::new(s, i, frame))
+        };
+        if self.segments.len() <= STACK_SEGMENTS {
+            let empty = PosedSeg::new(&self.segments[0], 0, &Rigid3::identity());
+            let mut buf = [empty; STACK_SEGMENTS];
+            let mut n = 0;
+            for ps in self.segments.iter().enumerate().filter_map(posed_seg) {
+                buf[n] = ps;
+                n += 1;
+            }
+            f(&buf[..n])
+        } else {
+            let v: Vec<PosedSeg> = self
+                .segments
+                .iter()
+                .enumerate()
+                .filter_map(posed_seg)
+                .collect();
+            f(&v)
+        }
+    }
+
+    /// The model-wide query on precomputed segments: the segment with the smallest signed
+    /// distance wins (ties go to the lowest segment index, as in a plain scan). The segment
+    /// whose bounding capsule is nearest is projected first; any other is skipped when the
+    /// query lies outside its bounding capsule farther than the best distance found, which
+    /// cannot change the result. Falls back to the plain scan in the (overflow) case where the
+    /// winner's world result is not finite.
+    fn best_of(
+        &self,
+        segs: &[PosedSeg],
+        posed: &PosedSkeleton,
+        p: &Vector3<f64>,
+        view: Option<View>,
+    ) -> Option<CylinderProjection> {
+        let mut first = None;
+        let mut min_lb = f64::INFINITY;
+        for (j, s) in segs.iter().enumerate() {
+            let lb = s.lower_bound(p);
+            if lb < min_lb {
+                min_lb = lb;
+                first = Some(j);
+            }
+        }
+        let mut best: Option<(f64, usize, Local)> = None;
+        let mut eval = |j: usize, best: &mut Option<(f64, usize, Local)>| {
+            let s = &segs[j];
+            let seg = &self.segments[s.index];
+            let frame = &s.frame;
+            let pl = frame.rotation.transpose() * (p - frame.translation);
+            let l = match view {
+                Some(v) => seg.front_facing_local(&pl, &LocalView::new(v, frame)),
+                None => seg.closest_local(&pl, None),
+            };
+            let finite = l.dist.is_finite() && l.q.iter().chain(l.n.iter()).all(|v| v.is_finite());
+            if finite
+                && best.is_none_or(|(bd, bi, _)| l.dist < bd || (l.dist == bd && s.index < bi))
+            {
+                *best = Some((l.dist, s.index, l));
+            }
+        };
+        if let Some(f) = first {
+            eval(f, &mut best);
+        }
+        for j in 0..segs.len() {
+            if Some(j) == first {
+                continue;
+            }
+            if let Some((bd, _, _)) = best {
+                let lb = segs[j].lower_bound(p);
+                if lb > 0.0 && lb > bd + 1e-9 * (1.0 + bd.abs()) {
+                    continue;
+                }
+            }
+            eval(j, &mut best);
+        }
+        let (_, index, l) = best?;
+        let s = segs.iter().find(|s| s.index == index)?;
+        finish(l, &self.segments[index], index, &s.frame).or_else(|| self.scan(posed, p, view))
+    }
+
+    /// The plain scan over every segment (the reference of [`CylinderModel::closest_point`]
+    /// and [`CylinderModel::front_facing_point`]).
+    fn scan(
+        &self,
+        posed: &PosedSkeleton,
+        p: &Vector3<f64>,
+        view: Option<View>,
+    ) -> Option<CylinderProjection> {
+        let mut best: Option<CylinderProjection> = None;
+        for i in 0..self.segments.len() {
+            let Some((s, frame)) = self.frame(posed, i) else {
+                continue;
+            };
+            let pl = frame.rotation.transpose() * (p - frame.translation);
+            let l = match view {
+                Some(v) => s.front_facing_local(&pl, &LocalView::new(v, frame)),
+                None => s.closest_local(&pl, None),
+            };
+            if let Some(r) = finish(l, s, i, frame) {
+                if best.is_none_or(|b| r.distance < b.distance) {
+                    best = Some(r);
+                }
+            }
+        }
+        best
+    }
+
     /// The closest point of the model surface to `p` (the projection `Π_M` of Eq. 2.2 without
     /// the front-facing rule): the segment with the smallest signed distance wins.
     /// `posed` must come from this model's skeleton; `None` for a non-finite point.
@@ -668,22 +828,23 @@ impl CylinderModel {
         posed: &PosedSkeleton,
         p: &Vector3<f64>,
     ) -> Option<CylinderProjection> {
+        if !p.iter().all(|v| v.is_finite()) || self.segments.is_empty() {
+            return None;
+        }
+        self.with_posed_segments(posed, |segs| self.best_of(segs, posed, p, None))
+    }
+
+    /// The closest point computed by projecting `p` on every segment, without the culling of
+    /// [`CylinderModel::closest_point`] (same result; a baseline for benchmarks and tests).
+    pub fn closest_point_brute_force(
+        &self,
+        posed: &PosedSkeleton,
+        p: &Vector3<f64>,
+    ) -> Option<CylinderProjection> {
         if !p.iter().all(|v| v.is_finite()) {
             return None;
         }
-        let mut best: Option<CylinderProjection> = None;
-        for i in 0..self.segments.len() {
-            let Some((s, frame)) = self.frame(posed, i) else {
-                continue;
-            };
-            let pl = frame.rotation.transpose() * (p - frame.translation);
-            if let Some(r) = finish(s.closest_local(&pl, None), s, i, frame) {
-                if best.is_none_or(|b| r.distance < b.distance) {
-                    best = Some(r);
-                }
-            }
-        }
-        best
+        self.scan(posed, p, None)
     }
 
     /// The front-facing correspondence of §2.3.1 ("3D correspondences"): on every segment the
@@ -696,28 +857,31 @@ impl CylinderModel {
         p: &Vector3<f64>,
         view: View,
     ) -> Option<CylinderProjection> {
+        if !p.iter().all(|v| v.is_finite()) || self.segments.is_empty() {
+            return None;
+        }
+        self.with_posed_segments(posed, |segs| self.best_of(segs, posed, p, Some(view)))
+    }
+
+    /// [`CylinderModel::front_facing_point`] computed on every segment, without culling (same
+    /// result; a baseline for benchmarks and tests).
+    pub fn front_facing_point_brute_force(
+        &self,
+        posed: &PosedSkeleton,
+        p: &Vector3<f64>,
+        view: View,
+    ) -> Option<CylinderProjection> {
         if !p.iter().all(|v| v.is_finite()) {
             return None;
         }
-        let mut best: Option<CylinderProjection> = None;
-        for i in 0..self.segments.len() {
-            let Some((s, frame)) = self.frame(posed, i) else {
-                continue;
-            };
-            let pl = frame.rotation.transpose() * (p - frame.translation);
-            let lv = LocalView::new(view, frame);
-            if let Some(r) = finish(s.front_facing_local(&pl, &lv), s, i, frame) {
-                if best.is_none_or(|b| r.distance < b.distance) {
-                    best = Some(r);
-                }
-            }
-        }
-        best
+        self.scan(posed, p, Some(view))
     }
 
     /// Batch form: `out[i]` receives [`CylinderModel::front_facing_point`] of `points[i]` (with
-    /// `Some(view)`) or [`CylinderModel::closest_point`] (with `None`). Allocates nothing.
-    /// Returns how many points got a correspondence; `out` must be as long as `points`.
+    /// `Some(view)`) or [`CylinderModel::closest_point`] (with `None`). The per-pose segment
+    /// data is computed once for the whole batch. Allocates nothing for models of up to 32
+    /// segments. Returns how many points got a correspondence; `out` must be as long as
+    /// `points`.
     pub fn project_points(
         &self,
         posed: &PosedSkeleton,
@@ -731,15 +895,22 @@ impl CylinderModel {
                 reason: format!("{} slots for {} points", out.len(), points.len()),
             });
         }
-        let mut count = 0;
-        for (o, p) in out.iter_mut().zip(points) {
-            *o = match view {
-                Some(v) => self.front_facing_point(posed, p, v),
-                None => self.closest_point(posed, p),
-            };
-            count += usize::from(o.is_some());
+        if self.segments.is_empty() {
+            out.fill(None);
+            return Ok(0);
         }
-        Ok(count)
+        Ok(self.with_posed_segments(posed, |segs| {
+            let mut count = 0;
+            for (o, p) in out.iter_mut().zip(points) {
+                *o = if p.iter().all(|v| v.is_finite()) {
+                    self.best_of(segs, posed, p, view)
+                } else {
+                    None
+                };
+                count += usize::from(o.is_some());
+            }
+            count
+        }))
     }
 }
 
