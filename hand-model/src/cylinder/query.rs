@@ -331,11 +331,23 @@ impl Segment {
 
     /// Front-facing closest point in the bone frame (§2.3.1).
     fn front_facing_local(&self, p: &Vector3<f64>, view: &LocalView) -> Local {
+        let base = self.front_facing_base(p, view);
+        self.front_facing_from_base(p, view, base)
+    }
+
+    /// The closest point that [`Segment::front_facing_local`] starts from (the azimuth on the
+    /// axis chosen toward the camera).
+    #[inline]
+    fn front_facing_base(&self, p: &Vector3<f64>, view: &LocalView) -> Local {
         let toward_camera = match view {
             LocalView::Dir(w) => -w,
             LocalView::Eye(o) => o - p,
         };
-        let base = self.closest_local(p, Some(toward_camera));
+        self.closest_local(p, Some(toward_camera))
+    }
+
+    /// [`Segment::front_facing_local`] given its base closest point.
+    fn front_facing_from_base(&self, p: &Vector3<f64>, view: &LocalView, base: Local) -> Local {
         if base.n.dot(&view.ray(&base.q)) < 0.0 {
             return base;
         }
@@ -401,13 +413,20 @@ impl Segment {
         let (r, ry) = self.radii_at(t);
         let l = self.length;
         let (dr, dry) = (self.r2 - self.r1, self.r2y - self.r1y);
-        let g = |phi: f64| {
-            let (s, c) = phi.sin_cos();
+        let g_at = |s: f64, c: f64| {
             let n = Vector3::new(l * ry * c, -(ry * dr * c * c + r * dry * s * s), l * r * s);
             let q = Vector3::new(r * c, t * l, ry * s);
             let v = view.ray(&q);
             n.dot(&v) / (n.norm() * v.norm()).max(f64::MIN_POSITIVE)
         };
+        let g = |phi: f64| {
+            let (s, c) = phi.sin_cos();
+            g_at(s, c)
+        };
+        // Exact generators (circular segments, untapered ratio) need no trigonometry.
+        if g_at(uz, ux).abs() <= 1e-12 {
+            return Some(Foot::Side { t, ux, uz });
+        }
         let phi0 = uz.atan2(ux);
         let g0 = g(phi0);
         if g0.abs() <= 1e-12 {
@@ -665,6 +684,14 @@ struct PosedSeg {
     inv_len2: f64,
     /// The largest half-axis: every surface point is within `reach` of the axis segment.
     reach: f64,
+    /// Whether the segment is circular (its closest point is then exact).
+    circular: bool,
+}
+
+/// Slack of the culling tests, far above the rounding of the distances they compare.
+#[inline]
+fn margin(d: f64) -> f64 {
+    1e-9 * (1.0 + d.abs())
 }
 
 /// Segments whose per-pose data fits on the stack (more fall back to a heap buffer).
@@ -681,6 +708,7 @@ impl PosedSeg {
             axis,
             inv_len2: if len2 > 0.0 { 1.0 / len2 } else { 0.0 },
             reach: seg.r1.max(seg.r2).max(seg.r1y).max(seg.r2y),
+            circular: seg.is_circular(),
         }
     }
 
@@ -749,21 +777,35 @@ impl CylinderModel {
     ) -> Option<CylinderProjection> {
         let mut first = None;
         let mut min_lb = f64::INFINITY;
+        let mut lbs = [0.0; STACK_SEGMENTS];
         for (j, s) in segs.iter().enumerate() {
             let lb = s.lower_bound(p);
+            if let Some(slot) = lbs.get_mut(j) {
+                *slot = lb;
+            }
             if lb < min_lb {
                 min_lb = lb;
                 first = Some(j);
             }
         }
         let mut best: Option<(f64, usize, Local)> = None;
-        let mut eval = |j: usize, best: &mut Option<(f64, usize, Local)>| {
-            let s = &segs[j];
+        let eval = |s: &PosedSeg, best: &mut Option<(f64, usize, Local)>| {
             let seg = &self.segments[s.index];
             let frame = &s.frame;
             let pl = frame.rotation.transpose() * (p - frame.translation);
             let l = match view {
-                Some(v) => seg.front_facing_local(&pl, &LocalView::new(v, frame)),
+                Some(v) => {
+                    let lv = LocalView::new(v, frame);
+                    let base = seg.front_facing_base(&pl, &lv);
+                    // On a circular segment the base is the exact closest point, so for a query
+                    // outside it no front-facing result (a surface point) is closer.
+                    if let Some((bd, _, _)) = *best {
+                        if s.circular && base.dist > 0.0 && base.dist > bd + margin(bd) {
+                            return;
+                        }
+                    }
+                    seg.front_facing_from_base(&pl, &lv, base)
+                }
                 None => seg.closest_local(&pl, None),
             };
             let finite = l.dist.is_finite() && l.q.iter().chain(l.n.iter()).all(|v| v.is_finite());
@@ -774,19 +816,19 @@ impl CylinderModel {
             }
         };
         if let Some(f) = first {
-            eval(f, &mut best);
+            eval(&segs[f], &mut best);
         }
-        for j in 0..segs.len() {
+        for (j, s) in segs.iter().enumerate() {
             if Some(j) == first {
                 continue;
             }
             if let Some((bd, _, _)) = best {
-                let lb = segs[j].lower_bound(p);
-                if lb > 0.0 && lb > bd + 1e-9 * (1.0 + bd.abs()) {
+                let lb = lbs.get(j).copied().unwrap_or_else(|| s.lower_bound(p));
+                if lb > 0.0 && lb > bd + margin(bd) {
                     continue;
                 }
             }
-            eval(j, &mut best);
+            eval(s, &mut best);
         }
         let (_, index, l) = best?;
         let s = segs.iter().find(|s| s.index == index)?;
