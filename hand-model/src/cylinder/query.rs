@@ -50,6 +50,16 @@
 //! generator point is then moved around its cross-section ring by a few Newton steps onto the
 //! exact contour `n·v = 0`, and dropped when that ring has no contour point.
 //!
+//! # Culling
+//! The model-wide queries compute, once per pose (once per batch in
+//! [`CylinderModel::project_points`]), each segment's frame and a bounding capsule (its axis,
+//! radius the largest half-axis). Per query the segment with the nearest capsule is projected
+//! first; any other is skipped when the query lies outside its capsule by more than the best
+//! distance found (and, front-facing, when on a circular segment the exact closest distance
+//! already exceeds it). Such a segment cannot win, so the result equals the plain scan over all
+//! segments ([`CylinderModel::closest_point_brute_force`],
+//! [`CylinderModel::front_facing_point_brute_force`]); ties go to the lower segment index.
+//!
 //! # Non-finite input
 //! Queries with a non-finite point, or whose result would not be finite, return `None`; nothing
 //! here panics on finite input.
