@@ -437,6 +437,40 @@ fn model_queries_pick_the_best_segment_and_batch_matches() {
 }
 
 #[test]
+fn culled_model_queries_equal_the_brute_force_scan() {
+    let mut rng = ChaCha8Rng::seed_from_u64(29);
+    let mut elliptic = default_right_hand_cylinders();
+    // An elliptical, tapered palm (width and thickness both tapering) and one flattened finger.
+    elliptic.segments[0].r1y = elliptic.segments[0].r1 * 0.45;
+    elliptic.segments[0].r2y = elliptic.segments[0].r2 * 0.6;
+    elliptic.segments[5].r2y = elliptic.segments[5].r2 * 0.7;
+    for model in [default_right_hand_cylinders(), elliptic] {
+        for _ in 0..4 {
+            let posed = model.posed(&random_pose(&model, &mut rng)).unwrap();
+            let mut points = points_near_model(&model, &posed, &mut rng, 400);
+            // Far points and points around the palm center.
+            let c = posed.globals[model.segments[0].bone].translation;
+            for _ in 0..100 {
+                points.push(c + v3(&mut rng, [-150.0; 3], [150.0; 3]));
+            }
+            let mut out = vec![None; points.len()];
+            for view in [None, Some(View::Orthographic), Some(View::Perspective)] {
+                model
+                    .project_points(&posed, &points, view, &mut out)
+                    .unwrap();
+                for (p, o) in points.iter().zip(&out) {
+                    let brute = match view {
+                        None => model.closest_point_brute_force(&posed, p),
+                        Some(v) => model.front_facing_point_brute_force(&posed, p, v),
+                    };
+                    assert_eq!(*o, brute, "{view:?} at {p:?}");
+                }
+            }
+        }
+    }
+}
+
+#[test]
 fn skeleton_jacobian_matches_finite_differences() {
     let mut rng = ChaCha8Rng::seed_from_u64(17);
     let mut models = vec![default_right_hand_cylinders()];

@@ -327,3 +327,34 @@ fn lm_recovers_a_perturbed_pose_from_a_synthetic_cloud() {
     let (_, _, _, after) = solve_synthetic(30);
     assert!(after.1 < 1e-3, "{after:?}");
 }
+
+/// Prints the cost of one `TrackingCtx::update` (front-facing correspondences of the whole
+/// ray-marched cloud, IRLS weights) at the perturbed pose; the results must not depend on
+/// whether the correspondences were culled.
+#[test]
+fn update_timing_on_the_full_cloud() {
+    let model = default_right_hand_cylinders();
+    let target = target_pose(&model);
+    let points = visible_surface_points(&model, &model.posed(&target).unwrap(), &camera(), 1, 0.5);
+    let pose = perturbed_pose(&model, &target);
+    let mut ctx = TrackingCtx::new(&model, View::Orthographic, IrlsParams::default());
+    ctx.set_points(&points);
+    ctx.update(&pose, false).unwrap();
+    let runs = 10;
+    let start = std::time::Instant::now();
+    for _ in 0..runs {
+        ctx.update(&pose, false).unwrap();
+    }
+    let ms = start.elapsed().as_secs_f64() * 1e3 / f64::from(runs);
+    eprintln!(
+        "TrackingCtx::update: {ms:.2} ms for {} points",
+        points.len()
+    );
+    let posed = model.posed(&pose).unwrap();
+    for (p, c) in points.iter().zip(ctx.correspondences()) {
+        assert_eq!(
+            *c,
+            model.front_facing_point_brute_force(&posed, p, View::Orthographic)
+        );
+    }
+}

@@ -50,6 +50,16 @@
 //! generator point is then moved around its cross-section ring by a few Newton steps onto the
 //! exact contour `n·v = 0`, and dropped when that ring has no contour point.
 //!
+//! # Culling
+//! The model-wide queries compute, once per pose (once per batch in
+//! [`CylinderModel::project_points`]), each segment's frame and a bounding capsule (its axis,
+//! radius the largest half-axis). Per query the segment with the nearest capsule is projected
+//! first; any other is skipped when the query lies outside its capsule by more than the best
+//! distance found (and, front-facing, when on a circular segment the exact closest distance
+//! already exceeds it). Such a segment cannot win, so the result equals the plain scan over all
+//! segments ([`CylinderModel::closest_point_brute_force`],
+//! [`CylinderModel::front_facing_point_brute_force`]); ties go to the lower segment index.
+//!
 //! # Non-finite input
 //! Queries with a non-finite point, or whose result would not be finite, return `None`; nothing
 //! here panics on finite input.
@@ -331,11 +341,23 @@ impl Segment {
 
     /// Front-facing closest point in the bone frame (§2.3.1).
     fn front_facing_local(&self, p: &Vector3<f64>, view: &LocalView) -> Local {
+        let base = self.front_facing_base(p, view);
+        self.front_facing_from_base(p, view, base)
+    }
+
+    /// The closest point that [`Segment::front_facing_local`] starts from (the azimuth on the
+    /// axis chosen toward the camera).
+    #[inline]
+    fn front_facing_base(&self, p: &Vector3<f64>, view: &LocalView) -> Local {
         let toward_camera = match view {
             LocalView::Dir(w) => -w,
             LocalView::Eye(o) => o - p,
         };
-        let base = self.closest_local(p, Some(toward_camera));
+        self.closest_local(p, Some(toward_camera))
+    }
+
+    /// [`Segment::front_facing_local`] given its base closest point.
+    fn front_facing_from_base(&self, p: &Vector3<f64>, view: &LocalView, base: Local) -> Local {
         if base.n.dot(&view.ray(&base.q)) < 0.0 {
             return base;
         }
@@ -401,13 +423,20 @@ impl Segment {
         let (r, ry) = self.radii_at(t);
         let l = self.length;
         let (dr, dry) = (self.r2 - self.r1, self.r2y - self.r1y);
-        let g = |phi: f64| {
-            let (s, c) = phi.sin_cos();
+        let g_at = |s: f64, c: f64| {
             let n = Vector3::new(l * ry * c, -(ry * dr * c * c + r * dry * s * s), l * r * s);
             let q = Vector3::new(r * c, t * l, ry * s);
             let v = view.ray(&q);
             n.dot(&v) / (n.norm() * v.norm()).max(f64::MIN_POSITIVE)
         };
+        let g = |phi: f64| {
+            let (s, c) = phi.sin_cos();
+            g_at(s, c)
+        };
+        // Exact generators (circular segments, untapered ratio) need no trigonometry.
+        if g_at(uz, ux).abs() <= 1e-12 {
+            return Some(Foot::Side { t, ux, uz });
+        }
         let phi0 = uz.atan2(ux);
         let g0 = g(phi0);
         if g0.abs() <= 1e-12 {
@@ -649,6 +678,60 @@ fn profile_inside(rho: f64, y: f64, a: f64, b: f64, l: f64) -> bool {
     }
 }
 
+/// Per-pose data of one segment for the model-wide queries: its frame and a bounding capsule
+/// (the axis from `start` to `start + axis`, radius `reach`) that contains the whole segment.
+#[derive(Copy, Clone, Debug)]
+struct PosedSeg {
+    /// Index into [`CylinderModel::segments`].
+    index: usize,
+    /// The bone frame.
+    frame: Rigid3,
+    /// World start of the axis (the bone origin).
+    start: Vector3<f64>,
+    /// World axis vector (start → end).
+    axis: Vector3<f64>,
+    /// `1 / ‖axis‖²`, or 0 for a degenerate axis.
+    inv_len2: f64,
+    /// The largest half-axis: every surface point is within `reach` of the axis segment.
+    reach: f64,
+    /// Whether the segment is circular (its closest point is then exact).
+    circular: bool,
+}
+
+/// Slack of the culling tests, far above the rounding of the distances they compare.
+#[inline]
+fn margin(d: f64) -> f64 {
+    1e-9 * (1.0 + d.abs())
+}
+
+/// Segments whose per-pose data fits on the stack (more fall back to a heap buffer).
+const STACK_SEGMENTS: usize = 32;
+
+impl PosedSeg {
+    fn new(seg: &Segment, index: usize, frame: &Rigid3) -> Self {
+        let axis = frame.rotation.column(1) * seg.length;
+        let len2 = axis.norm_squared();
+        PosedSeg {
+            index,
+            frame: *frame,
+            start: frame.translation,
+            axis,
+            inv_len2: if len2 > 0.0 { 1.0 / len2 } else { 0.0 },
+            reach: seg.r1.max(seg.r2).max(seg.r1y).max(seg.r2y),
+            circular: seg.is_circular(),
+        }
+    }
+
+    /// A lower bound of the distance from `p` to the segment surface when `p` is outside the
+    /// bounding capsule (the bound is then positive); ≤ 0 when `p` may be inside the segment.
+    #[inline]
+    fn lower_bound(&self, p: &Vector3<f64>) -> f64 {
+        let d = p - self.start;
+        let t = (d.dot(&self.axis) * self.inv_len2).clamp(0.0, 1.0);
+        (d - self.axis * t).norm() - self.reach
+    }
+}
+
 impl CylinderModel {
     /// Frame of segment `i` in `posed`, when both exist.
     fn frame<'a>(
@@ -660,6 +743,135 @@ impl CylinderModel {
         Some((s, posed.globals.get(s.bone)?))
     }
 
+    /// Run `f` on the per-pose data of every segment whose bone exists in `posed` (in segment
+    /// order), without allocating for models of up to [`STACK_SEGMENTS`] segments.
+    fn with_posed_segments<R>(&self, posed: &PosedSkeleton, f: impl FnOnce(&[PosedSeg]) -> R) -> R {
+        let posed_seg = |(i, s): (usize, &Segment)| {
+            posed
+                .globals
+                .get(s.bone)
+                .map(|frame| PosedSeg::new(s, i, frame))
+        };
+        if self.segments.len() <= STACK_SEGMENTS {
+            let empty = PosedSeg::new(&self.segments[0], 0, &Rigid3::identity());
+            let mut buf = [empty; STACK_SEGMENTS];
+            let mut n = 0;
+            for ps in self.segments.iter().enumerate().filter_map(posed_seg) {
+                buf[n] = ps;
+                n += 1;
+            }
+            f(&buf[..n])
+        } else {
+            let v: Vec<PosedSeg> = self
+                .segments
+                .iter()
+                .enumerate()
+                .filter_map(posed_seg)
+                .collect();
+            f(&v)
+        }
+    }
+
+    /// The model-wide query on precomputed segments: the segment with the smallest signed
+    /// distance wins (ties go to the lowest segment index, as in a plain scan). The segment
+    /// whose bounding capsule is nearest is projected first; any other is skipped when the
+    /// query lies outside its bounding capsule farther than the best distance found, which
+    /// cannot change the result. Falls back to the plain scan in the (overflow) case where the
+    /// winner's world result is not finite.
+    fn best_of(
+        &self,
+        segs: &[PosedSeg],
+        posed: &PosedSkeleton,
+        p: &Vector3<f64>,
+        view: Option<View>,
+    ) -> Option<CylinderProjection> {
+        let mut first = None;
+        let mut min_lb = f64::INFINITY;
+        let mut lbs = [0.0; STACK_SEGMENTS];
+        for (j, s) in segs.iter().enumerate() {
+            let lb = s.lower_bound(p);
+            if let Some(slot) = lbs.get_mut(j) {
+                *slot = lb;
+            }
+            if lb < min_lb {
+                min_lb = lb;
+                first = Some(j);
+            }
+        }
+        let mut best: Option<(f64, usize, Local)> = None;
+        let eval = |s: &PosedSeg, best: &mut Option<(f64, usize, Local)>| {
+            let seg = &self.segments[s.index];
+            let frame = &s.frame;
+            let pl = frame.rotation.transpose() * (p - frame.translation);
+            let l = match view {
+                Some(v) => {
+                    let lv = LocalView::new(v, frame);
+                    let base = seg.front_facing_base(&pl, &lv);
+                    // On a circular segment the base is the exact closest point, so for a query
+                    // outside it no front-facing result (a surface point) is closer.
+                    if let Some((bd, _, _)) = *best {
+                        if s.circular && base.dist > 0.0 && base.dist > bd + margin(bd) {
+                            return;
+                        }
+                    }
+                    seg.front_facing_from_base(&pl, &lv, base)
+                }
+                None => seg.closest_local(&pl, None),
+            };
+            let finite = l.dist.is_finite() && l.q.iter().chain(l.n.iter()).all(|v| v.is_finite());
+            if finite
+                && best.is_none_or(|(bd, bi, _)| l.dist < bd || (l.dist == bd && s.index < bi))
+            {
+                *best = Some((l.dist, s.index, l));
+            }
+        };
+        if let Some(f) = first {
+            eval(&segs[f], &mut best);
+        }
+        for (j, s) in segs.iter().enumerate() {
+            if Some(j) == first {
+                continue;
+            }
+            if let Some((bd, _, _)) = best {
+                let lb = lbs.get(j).copied().unwrap_or_else(|| s.lower_bound(p));
+                if lb > 0.0 && lb > bd + margin(bd) {
+                    continue;
+                }
+            }
+            eval(s, &mut best);
+        }
+        let (_, index, l) = best?;
+        let s = segs.iter().find(|s| s.index == index)?;
+        finish(l, &self.segments[index], index, &s.frame).or_else(|| self.scan(posed, p, view))
+    }
+
+    /// The plain scan over every segment (the reference of [`CylinderModel::closest_point`]
+    /// and [`CylinderModel::front_facing_point`]).
+    fn scan(
+        &self,
+        posed: &PosedSkeleton,
+        p: &Vector3<f64>,
+        view: Option<View>,
+    ) -> Option<CylinderProjection> {
+        let mut best: Option<CylinderProjection> = None;
+        for i in 0..self.segments.len() {
+            let Some((s, frame)) = self.frame(posed, i) else {
+                continue;
+            };
+            let pl = frame.rotation.transpose() * (p - frame.translation);
+            let l = match view {
+                Some(v) => s.front_facing_local(&pl, &LocalView::new(v, frame)),
+                None => s.closest_local(&pl, None),
+            };
+            if let Some(r) = finish(l, s, i, frame) {
+                if best.is_none_or(|b| r.distance < b.distance) {
+                    best = Some(r);
+                }
+            }
+        }
+        best
+    }
+
     /// The closest point of the model surface to `p` (the projection `Π_M` of Eq. 2.2 without
     /// the front-facing rule): the segment with the smallest signed distance wins.
     /// `posed` must come from this model's skeleton; `None` for a non-finite point.
@@ -668,22 +880,23 @@ impl CylinderModel {
         posed: &PosedSkeleton,
         p: &Vector3<f64>,
     ) -> Option<CylinderProjection> {
+        if !p.iter().all(|v| v.is_finite()) || self.segments.is_empty() {
+            return None;
+        }
+        self.with_posed_segments(posed, |segs| self.best_of(segs, posed, p, None))
+    }
+
+    /// The closest point computed by projecting `p` on every segment, without the culling of
+    /// [`CylinderModel::closest_point`] (same result; a baseline for benchmarks and tests).
+    pub fn closest_point_brute_force(
+        &self,
+        posed: &PosedSkeleton,
+        p: &Vector3<f64>,
+    ) -> Option<CylinderProjection> {
         if !p.iter().all(|v| v.is_finite()) {
             return None;
         }
-        let mut best: Option<CylinderProjection> = None;
-        for i in 0..self.segments.len() {
-            let Some((s, frame)) = self.frame(posed, i) else {
-                continue;
-            };
-            let pl = frame.rotation.transpose() * (p - frame.translation);
-            if let Some(r) = finish(s.closest_local(&pl, None), s, i, frame) {
-                if best.is_none_or(|b| r.distance < b.distance) {
-                    best = Some(r);
-                }
-            }
-        }
-        best
+        self.scan(posed, p, None)
     }
 
     /// The front-facing correspondence of §2.3.1 ("3D correspondences"): on every segment the
@@ -696,28 +909,31 @@ impl CylinderModel {
         p: &Vector3<f64>,
         view: View,
     ) -> Option<CylinderProjection> {
+        if !p.iter().all(|v| v.is_finite()) || self.segments.is_empty() {
+            return None;
+        }
+        self.with_posed_segments(posed, |segs| self.best_of(segs, posed, p, Some(view)))
+    }
+
+    /// [`CylinderModel::front_facing_point`] computed on every segment, without culling (same
+    /// result; a baseline for benchmarks and tests).
+    pub fn front_facing_point_brute_force(
+        &self,
+        posed: &PosedSkeleton,
+        p: &Vector3<f64>,
+        view: View,
+    ) -> Option<CylinderProjection> {
         if !p.iter().all(|v| v.is_finite()) {
             return None;
         }
-        let mut best: Option<CylinderProjection> = None;
-        for i in 0..self.segments.len() {
-            let Some((s, frame)) = self.frame(posed, i) else {
-                continue;
-            };
-            let pl = frame.rotation.transpose() * (p - frame.translation);
-            let lv = LocalView::new(view, frame);
-            if let Some(r) = finish(s.front_facing_local(&pl, &lv), s, i, frame) {
-                if best.is_none_or(|b| r.distance < b.distance) {
-                    best = Some(r);
-                }
-            }
-        }
-        best
+        self.scan(posed, p, Some(view))
     }
 
     /// Batch form: `out[i]` receives [`CylinderModel::front_facing_point`] of `points[i]` (with
-    /// `Some(view)`) or [`CylinderModel::closest_point`] (with `None`). Allocates nothing.
-    /// Returns how many points got a correspondence; `out` must be as long as `points`.
+    /// `Some(view)`) or [`CylinderModel::closest_point`] (with `None`). The per-pose segment
+    /// data is computed once for the whole batch. Allocates nothing for models of up to 32
+    /// segments. Returns how many points got a correspondence; `out` must be as long as
+    /// `points`.
     pub fn project_points(
         &self,
         posed: &PosedSkeleton,
@@ -731,15 +947,22 @@ impl CylinderModel {
                 reason: format!("{} slots for {} points", out.len(), points.len()),
             });
         }
-        let mut count = 0;
-        for (o, p) in out.iter_mut().zip(points) {
-            *o = match view {
-                Some(v) => self.front_facing_point(posed, p, v),
-                None => self.closest_point(posed, p),
-            };
-            count += usize::from(o.is_some());
+        if self.segments.is_empty() {
+            out.fill(None);
+            return Ok(0);
         }
-        Ok(count)
+        Ok(self.with_posed_segments(posed, |segs| {
+            let mut count = 0;
+            for (o, p) in out.iter_mut().zip(points) {
+                *o = if p.iter().all(|v| v.is_finite()) {
+                    self.best_of(segs, posed, p, view)
+                } else {
+                    None
+                };
+                count += usize::from(o.is_some());
+            }
+            count
+        }))
     }
 }
 
