@@ -13,7 +13,7 @@ use hand_model::render::preview::{
     frame_model, render_preview, write_png, PreviewOptions, ViewSide,
 };
 use hand_model::render::{extract_mesh, DepthRender, DepthRenderer, MeshOptions};
-use hand_model::shape::{Element, Sphere};
+use hand_model::shape::Element;
 use hand_model::spheremesh::{default_right_hand, PosedSphereMesh};
 
 fn main() -> hand_model::Result<()> {
@@ -53,16 +53,7 @@ fn main() -> hand_model::Result<()> {
 
     // 320×240 depth render, the thesis' resolution.
     let framing = frame_model(&posed.spheres, 320, 240, ViewSide::Palm)?;
-    let spheres: Vec<Sphere> = posed
-        .spheres
-        .iter()
-        .map(|s| {
-            Sphere::new(
-                framing.camera_from_model.transform_point(&s.center),
-                s.radius,
-            )
-        })
-        .collect();
+    let spheres = framing.spheres_in_camera(&posed.spheres);
     let mut renderer = DepthRenderer::new();
     let mut render = DepthRender::default();
     let mut times = vec![];

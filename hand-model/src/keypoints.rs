@@ -67,3 +67,16 @@ impl Handedness {
         }
     }
 }
+
+/// Refuse a keypoint list whose length is not [`NUM_KEYPOINTS`], naming the file and field.
+pub(crate) fn check_keypoint_count(source: &std::path::Path, len: usize) -> crate::Result<()> {
+    if len != NUM_KEYPOINTS {
+        return Err(crate::ModelError::field(
+            source,
+            "keypoints",
+            None,
+            format!("{len} keypoints, expected {NUM_KEYPOINTS}"),
+        ));
+    }
+    Ok(())
+}

@@ -162,17 +162,7 @@ impl CylinderModel {
             }
             s.validate(source, i)?;
         }
-        if self.keypoints.len() != NUM_KEYPOINTS {
-            return Err(ModelError::field(
-                source,
-                "keypoints",
-                None,
-                format!(
-                    "{} keypoints, expected {NUM_KEYPOINTS}",
-                    self.keypoints.len()
-                ),
-            ));
-        }
+        crate::keypoints::check_keypoint_count(source, self.keypoints.len())?;
         for (k, kp) in self.keypoints.iter().enumerate() {
             let ok = match *kp {
                 CylinderKeypoint::Joint { bone } => bone < nb,

@@ -60,6 +60,16 @@ pub struct Framing {
     pub camera_from_model: Rigid3,
 }
 
+impl Framing {
+    /// The spheres moved from the model frame into this camera's frame.
+    pub fn spheres_in_camera(&self, spheres: &[Sphere]) -> Vec<Sphere> {
+        spheres
+            .iter()
+            .map(|s| Sphere::new(self.camera_from_model.transform_point(&s.center), s.radius))
+            .collect()
+    }
+}
+
 /// Place a camera (§3.3.2 rendering) that looks at `spheres` (model frame) from `side`, with fingers (+y) up, so
 /// that the box of the spheres fills about 90 % of the tighter image side.
 ///
@@ -210,16 +220,7 @@ pub fn render_preview(
     }
     let posed = PosedSphereMesh::new(template, pose);
     let framing = frame_model(&posed.spheres, options.width, options.height, options.side)?;
-    let spheres: Vec<Sphere> = posed
-        .spheres
-        .iter()
-        .map(|s| {
-            Sphere::new(
-                framing.camera_from_model.transform_point(&s.center),
-                s.radius,
-            )
-        })
-        .collect();
+    let spheres = framing.spheres_in_camera(&posed.spheres);
     let elements: Vec<Element> = template.elements.iter().map(|e| e.element).collect();
     let colors: Vec<[u8; 3]> = template
         .elements

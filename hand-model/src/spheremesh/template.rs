@@ -5,7 +5,7 @@ use std::path::Path;
 use nalgebra::Vector3;
 
 use crate::error::{ModelError, Result};
-use crate::keypoints::{Handedness, KeypointDef, NUM_KEYPOINTS};
+use crate::keypoints::{Handedness, KeypointDef};
 use crate::kinematics::Skeleton;
 use crate::shape::Element;
 
@@ -162,17 +162,7 @@ impl SphereMeshTemplate {
                 ));
             }
         }
-        if self.keypoints.len() != NUM_KEYPOINTS {
-            return Err(ModelError::field(
-                source,
-                "keypoints",
-                None,
-                format!(
-                    "{} keypoints, expected {NUM_KEYPOINTS}",
-                    self.keypoints.len()
-                ),
-            ));
-        }
+        crate::keypoints::check_keypoint_count(source, self.keypoints.len())?;
         for (k, kp) in self.keypoints.iter().enumerate() {
             let (bone, sphere) = match kp {
                 KeypointDef::Joint { bone } => (*bone, None),
