@@ -6,6 +6,9 @@ use hand_model::cylinder::{CylinderModel, CylinderProjection, View};
 use hand_model::kinematics::{Pose, PosedSkeleton, Skeleton};
 use hand_model::solver::{IterInfo, LmCallback, PoseContext, TermError};
 use nalgebra::Vector3;
+use sensor_io::dt::NO_PIXEL;
+use sensor_io::preprocess::PreprocessedFrame;
+use sensor_io::Camera;
 use serde::{Deserialize, Serialize};
 
 /// How the ℓ1 norm of Eq. 2.2 is approximated by iteratively re-weighted least squares
@@ -91,6 +94,46 @@ pub struct TrackingCtx<'m> {
     rigid_only: bool,
     view: View,
     irls: IrlsParams,
+    sensor: SensorView,
+}
+
+/// What the image-space terms (E2D Eq. 2.3, E_wrist Eq. 2.4) read of the current frame: the
+/// camera of the processed images, for every pixel the linear index of the nearest sensor
+/// silhouette pixel (the distance transform of `S_s`, ANCHOR-FACTS §5.4), and the wristband
+/// axis when the segmentation found one.
+#[derive(Clone, Debug, Default)]
+pub struct SensorView {
+    /// Camera of the processed images; `None` before the first frame (image terms then add no
+    /// rows).
+    pub camera: Option<Camera>,
+    /// Per pixel (`v·width + u`) the nearest silhouette pixel; [`NO_PIXEL`] everywhere when the
+    /// silhouette is empty. Empty before the first frame.
+    pub nearest: Vec<u32>,
+    /// Wristband center and unit axis toward the hand (camera frame, mm).
+    pub wristband: Option<(Vector3<f64>, Vector3<f64>)>,
+}
+
+impl SensorView {
+    /// Whether pixel `(u, v)` (inside the image) belongs to the sensor silhouette `S_s`.
+    #[inline]
+    pub fn in_silhouette(&self, u: u32, v: u32) -> bool {
+        self.camera.as_ref().is_some_and(|c| {
+            let i = (v * c.width + u) as usize;
+            self.nearest.get(i).is_some_and(|&n| n as usize == i)
+        })
+    }
+
+    /// The nearest silhouette pixel `(u, v)` of pixel `(u, v)`, `None` outside the image or
+    /// when the silhouette is empty.
+    #[inline]
+    pub fn nearest_pixel(&self, u: u32, v: u32) -> Option<(u32, u32)> {
+        let c = self.camera.as_ref()?;
+        if u >= c.width || v >= c.height {
+            return None;
+        }
+        let n = *self.nearest.get((v * c.width + u) as usize)?;
+        (n != NO_PIXEL).then(|| (n % c.width, n / c.width))
+    }
 }
 
 impl<'m> TrackingCtx<'m> {
@@ -110,7 +153,37 @@ impl<'m> TrackingCtx<'m> {
             rigid_only: false,
             view,
             irls,
+            sensor: SensorView::default(),
         }
+    }
+
+    /// Take the sensor data of a preprocessed frame: its points `𝒳_s` ([`TrackingCtx::set_points`]),
+    /// camera, silhouette distance transform and wristband ([`SensorView`]). Reuses the buffers.
+    pub fn set_frame(&mut self, frame: &PreprocessedFrame) {
+        self.set_points(&frame.points);
+        self.sensor.camera.clone_from(&frame.camera);
+        self.sensor.nearest.clear();
+        let consistent = frame.camera.as_ref().is_some_and(|c| {
+            frame.dt.width() == c.width
+                && frame.dt.height() == c.height
+                && frame.dt.nearest.len() == c.num_pixels()
+        });
+        if consistent {
+            self.sensor.nearest.extend_from_slice(&frame.dt.nearest);
+        } else {
+            self.sensor.camera = None;
+        }
+        self.sensor.wristband = frame.hand.wristband;
+    }
+
+    /// The sensor data of the image-space terms.
+    pub fn sensor(&self) -> &SensorView {
+        &self.sensor
+    }
+
+    /// Mutable sensor data (tests and callers that build frames by hand).
+    pub fn sensor_mut(&mut self) -> &mut SensorView {
+        &mut self.sensor
     }
 
     /// Replace the sensor points `𝒳_s` (camera frame, mm); keeps the buffers' capacity. The

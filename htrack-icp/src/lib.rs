@@ -25,4 +25,4 @@ pub mod terms;
 #[cfg(test)]
 mod tests;
 
-pub use context::{CorrespondenceCallback, IrlsParams, TrackingCtx};
+pub use context::{CorrespondenceCallback, IrlsParams, SensorView, TrackingCtx};
