@@ -93,6 +93,7 @@ pub struct TrackingCtx<'m> {
     reweighted: bool,
     rigid_only: bool,
     view: View,
+    front_facing: bool,
     irls: IrlsParams,
     sensor: SensorView,
 }
@@ -152,6 +153,7 @@ impl<'m> TrackingCtx<'m> {
             reweighted: false,
             rigid_only: false,
             view,
+            front_facing: true,
             irls,
             sensor: SensorView::default(),
         }
@@ -224,7 +226,7 @@ impl<'m> TrackingCtx<'m> {
             .project_points(
                 &self.posed,
                 &self.points,
-                Some(self.view),
+                self.front_facing.then_some(self.view),
                 &mut self.correspondences,
             )
             .is_err()
@@ -294,6 +296,17 @@ impl<'m> TrackingCtx<'m> {
     /// The IRLS settings.
     pub fn irls(&self) -> &IrlsParams {
         &self.irls
+    }
+
+    /// Use front-facing correspondences (§2.3.1, default) or plain closest points (the
+    /// comparison of Fig. 2.6/2.8).
+    pub fn set_front_facing(&mut self, front_facing: bool) {
+        self.front_facing = front_facing;
+    }
+
+    /// Whether correspondences are front-facing.
+    pub fn front_facing(&self) -> bool {
+        self.front_facing
     }
 
     /// The camera model of the front-facing test.

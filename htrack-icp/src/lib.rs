@@ -21,8 +21,10 @@
 mod context;
 pub mod synthetic;
 pub mod terms;
+mod tracker;
 
 #[cfg(test)]
 mod tests;
 
 pub use context::{CorrespondenceCallback, IrlsParams, SensorView, TrackingCtx};
+pub use tracker::{EnabledTerms, FrameStats, LossParams, Tracker, TrackerConfig, TrackerError};

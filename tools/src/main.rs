@@ -5,6 +5,7 @@ mod demo;
 mod model;
 mod progress;
 mod synth;
+mod track;
 
 use clap::{Parser, Subcommand};
 
@@ -39,6 +40,9 @@ enum Command {
         after_help = "Example: hands synth --motion teaser --frames 600 --noise tof --seed 7 --out seq.mcap --preview sheet.png"
     )]
     Synth(synth::SynthArgs),
+    /// Track a depth sequence and write the per-frame pose, keypoints, energies and timings.
+    #[command(after_help = "Example: hands track seq.mcap --model cylinders --out track.jsonl")]
+    Track(track::TrackArgs),
 }
 
 fn main() -> anyhow::Result<()> {
@@ -48,5 +52,6 @@ fn main() -> anyhow::Result<()> {
         Command::Model(cmd) => model::run(cmd),
         Command::Convert(args) => convert::run(args),
         Command::Synth(args) => synth::run(args),
+        Command::Track(args) => track::run(args),
     }
 }
