@@ -95,7 +95,7 @@ fn huber_weight_matches_penalty_derivative() {
         // ρ'(r) = 2·w·r.
         assert!((num - 2.0 * irls.weight(r) * r).abs() < 1e-6, "r = {r}");
     }
-    assert_eq!(irls.penalty(-3.0), 3.0);
+    assert_eq!(irls.penalty(-3.0), 2.0 * 12.25 * 3.0);
     assert!(irls.weight(0.0).is_finite());
     let bad = IrlsParams {
         epsilon: f64::NAN,
@@ -196,12 +196,14 @@ fn rigid_iteration_is_not_reweighted_and_energy_is_l1() {
     assert!(ctx.weights().iter().all(|&w| w == 1.0));
     ctx.update(&pose, false).unwrap();
     assert!(!ctx.rigid_only() && ctx.reweighted());
-    // Closest-point correspondences: the Huber-ℓ1 energy is Σ‖x − y‖ (Eq. 2.2).
-    let l1: f64 = ctx
-        .correspondences()
-        .iter()
-        .map(|c| c.unwrap().distance.abs())
-        .sum();
+    // Closest-point correspondences: the Huber-ℓ1 energy is 2g Σ‖x − y‖ (Eq. 2.2).
+    let l1: f64 = 2.0
+        * IrlsParams::default().gain
+        * ctx
+            .correspondences()
+            .iter()
+            .map(|c| c.unwrap().distance.abs())
+            .sum::<f64>();
     let mut ne = hand_model::solver::NormalEquations::new(model.skeleton.num_dofs());
     let stats = E3d::default().accumulate(&ctx, &mut ne).unwrap();
     assert_eq!(stats.rows, points.len());

@@ -33,8 +33,8 @@ const MAX_CHAIN: usize = 64;
 /// the row `∂r/∂θ_k = nᵀ ∂y/∂θ_k`.
 ///
 /// The per-point weight `w` is [`TrackingCtx::weights`]: on reweighted iterations the IRLS
-/// weight `1/(2·max(|r|, ε))` of the Huber-ℓ1 penalty (see [`crate::IrlsParams`] for why this
-/// form), and the reported energy is `ω₁ Σ ρ_ε(r)` (= `ω₁ Σ‖x − y‖` for closest-point
+/// weight `g/max(|r|, ε)` of the Huber-ℓ1 penalty (see [`crate::IrlsParams`] for why this
+/// form), and the reported energy is `ω₁ 2g Σ ρ_ε(r)` (= `ω₁ 2g Σ‖x − y‖` for closest-point
 /// correspondences, Eq. 2.2); on the rigid iteration reweighting is off (htrack, ANCHOR-FACTS
 /// §5.3), `w = 1` and the energy is the point-to-plane least squares `ω₁ Σ r²`. Either way
 /// `−2b` is the gradient of the reported energy wherever `n ∥ x − y`, which the tests check by
