@@ -1,5 +1,13 @@
 //! # eval — metrics, reports and comparisons
 //!
-//! Not built yet (issue 7). This crate will hold the algorithm-agnostic metrics E_d2m and E_m2d
-//! (from sensor depth and a rendered model depth), marker errors and the fraction-of-frames-under-ε
-//! curves, E_β, and the reports and side-by-side comparisons written by `hands eval|compare`.
+//! - [`markers`]: per-frame average and maximum marker errors, fraction of frames under ε
+//!   (DESIGN.md "Metrics");
+//! - [`plot`]: SVG line plots for reports;
+//! - [`synthetic`]: scoring any tracker on a synthetic sequence with exact ground truth.
+//!
+//! Still to come (issue 7): E_d2m and E_m2d from sensor depth and a rendered model, E_β, the
+//! dataset formats and `hands eval|compare`.
+
+pub mod markers;
+pub mod plot;
+pub mod synthetic;
