@@ -42,7 +42,7 @@ pub fn line_plot_svg(
         x1 = x1.max(x);
         y1 = y1.max(y);
     }
-    if !(x0 < x1) {
+    if x0.partial_cmp(&x1) != Some(std::cmp::Ordering::Less) {
         (x0, x1) = (0.0, 1.0);
     }
     if let Some(c) = y_cap {
