@@ -10,6 +10,9 @@
 //!   of §2.3.1 "3D correspondences".
 //! - [`default_right_hand_cylinders`]: the project's own right-hand template with the proportions
 //!   of the htrack default model.
+//! - [`CylinderModel::from_sphere_mesh`]: a cylinder model fitted to a sphere-mesh template
+//!   (same bones and DOF names, keypoints that coincide at every pose), to track the synthetic
+//!   sequences of sphere-mesh subjects with the Ch. 2 tracker.
 //! - [`parse_htrack_calib`] / [`load_htrack_calib`]: the importer of htrack's `.calib` files.
 //!
 //! # Segment geometry
@@ -29,6 +32,7 @@
 
 mod calib;
 mod default;
+mod fit;
 mod model;
 pub mod query;
 

@@ -110,7 +110,7 @@ impl Segment {
 }
 
 /// How one of the 21 keypoints of `DESIGN.md` is read off a posed cylinder model.
-#[derive(Copy, Clone, Debug, PartialEq, Eq)]
+#[derive(Copy, Clone, Debug, PartialEq)]
 pub enum CylinderKeypoint {
     /// A joint: the origin (rotation center) of a bone.
     Joint {
@@ -121,6 +121,15 @@ pub enum CylinderKeypoint {
     Tip {
         /// The distal segment.
         segment: usize,
+    },
+    /// A point rigidly attached to a bone, given in the bone frame: a fingertip off its
+    /// segment's axis (the thumb tip of [`CylinderModel::from_sphere_mesh`], whose tip sphere
+    /// does not sit on the axis).
+    Point {
+        /// The bone.
+        bone: usize,
+        /// Position in the bone frame (mm).
+        offset: Vector3<f64>,
     },
 }
 
@@ -167,6 +176,9 @@ impl CylinderModel {
             let ok = match *kp {
                 CylinderKeypoint::Joint { bone } => bone < nb,
                 CylinderKeypoint::Tip { segment } => segment < self.segments.len(),
+                CylinderKeypoint::Point { bone, offset } => {
+                    bone < nb && offset.iter().all(|v| v.is_finite())
+                }
             };
             if !ok {
                 return Err(ModelError::field(
@@ -218,6 +230,9 @@ impl CylinderModel {
                         .get(s.bone)
                         .map(|g| g.transform_point(&s.tip_local()))
                 }),
+                CylinderKeypoint::Point { bone, offset } => {
+                    posed.globals.get(bone).map(|g| g.transform_point(&offset))
+                }
             };
             if let Some(p) = p {
                 out[k] = p;
@@ -258,7 +273,7 @@ impl CylinderModel {
     ///
     /// Rest frames are conjugated by `M = diag(−1, 1, 1)` and joint axes become `−M·a`, so the
     /// same θ gives the mirrored posture; segments are symmetric in their local x and keep their
-    /// numbers.
+    /// numbers; off-axis keypoint offsets are mirrored with their frames.
     pub fn mirrored(&self) -> Result<CylinderModel> {
         let m = Matrix3::from_diagonal(&Vector3::new(-1.0, 1.0, 1.0));
         let mut bones = self.skeleton.bones().to_vec();
@@ -278,7 +293,17 @@ impl CylinderModel {
             handedness: self.handedness.other(),
             skeleton,
             segments: self.segments.clone(),
-            keypoints: self.keypoints.clone(),
+            keypoints: self
+                .keypoints
+                .iter()
+                .map(|k| match *k {
+                    CylinderKeypoint::Point { bone, offset } => CylinderKeypoint::Point {
+                        bone,
+                        offset: m * offset,
+                    },
+                    other => other,
+                })
+                .collect(),
         })
     }
 }
