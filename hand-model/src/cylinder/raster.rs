@@ -196,25 +196,29 @@ impl CylinderRaster {
                 continue;
             }
             self.dirty = Some(self.dirty.map_or(rect, |d| d.union(rect)));
+            // Rays with direction (x, y, 1): the ray parameter is the camera depth z, and the
+            // bone-frame direction is affine in the pixel coordinates.
+            let du = rt.column(0) / camera.fx;
             for v in rect.v0..rect.v1 {
                 let y = (f64::from(v) - camera.cy) / camera.fy;
+                let x0 = (f64::from(rect.u0) - camera.cx) / camera.fx;
+                let mut dl = rt * Vector3::new(x0, y, 1.0);
                 let row = (v * w) as usize;
                 for u in rect.u0..rect.u1 {
-                    let x = (f64::from(u) - camera.cx) / camera.fx;
-                    let d = Vector3::new(x, y, 1.0);
-                    let d = d / d.norm();
                     let i = row + u as usize;
-                    let max_s = if self.segment[i] == NO_SEGMENT {
+                    let max_z = if self.segment[i] == NO_SEGMENT {
                         f64::INFINITY
                     } else {
-                        self.point[i].z / d.z
+                        self.point[i].z
                     };
-                    if let Some(s) = seg.cast_local_ray(&origin, &(rt * d), max_s) {
-                        if s < max_s {
+                    if let Some(z) = seg.cast_local_ray(&origin, &dl, max_z) {
+                        if z < max_z {
+                            let x = (f64::from(u) - camera.cx) / camera.fx;
                             self.segment[i] = si as u32;
-                            self.point[i] = d * s;
+                            self.point[i] = Vector3::new(x * z, y * z, z);
                         }
                     }
+                    dl += du;
                 }
             }
         }
