@@ -118,6 +118,11 @@ impl CylinderRaster {
         self.hit((v * self.width + u) as usize)
     }
 
+    /// Remove every rendered pixel (keeps the size and the buffers).
+    pub fn clear(&mut self) {
+        self.reset(self.width, self.height);
+    }
+
     /// Reset to an empty image of the given size, clearing only what the last render touched.
     fn reset(&mut self, width: u32, height: u32) {
         let n = width as usize * height as usize;
@@ -151,12 +156,10 @@ impl CylinderRaster {
         self.reset(camera.width, camera.height);
         self.bones.clear();
         self.bones.extend(model.segments.iter().map(|s| s.bone));
-        let frames_ok = model.segments.iter().all(|s| {
-            posed
-                .globals
-                .get(s.bone)
-                .is_some_and(|g| g.is_finite())
-        });
+        let frames_ok = model
+            .segments
+            .iter()
+            .all(|s| posed.globals.get(s.bone).is_some_and(|g| g.is_finite()));
         if !frames_ok {
             return Ok(0);
         }

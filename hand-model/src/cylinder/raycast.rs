@@ -163,8 +163,7 @@ fn slab(o: f64, d: f64, lo: f64, hi: f64) -> Option<(f64, f64)> {
 fn ball(m: &Vector3<f64>, d: &Vector3<f64>, radius: f64) -> Option<(f64, f64)> {
     let a = d.norm_squared();
     if a == 0.0 {
-        return (m.norm_squared() <= radius * radius)
-            .then_some((f64::NEG_INFINITY, f64::INFINITY));
+        return (m.norm_squared() <= radius * radius).then_some((f64::NEG_INFINITY, f64::INFINITY));
     }
     let sc = -m.dot(d) / a;
     let h2 = radius * radius - (m + d * sc).norm_squared();
@@ -178,7 +177,11 @@ fn ball(m: &Vector3<f64>, d: &Vector3<f64>, radius: f64) -> Option<(f64, f64)> {
 /// The interval of `s` where `x² + z² ≤ radius²` on the ray (2D version of [`ball`]).
 #[inline]
 fn tube(o: &Vector3<f64>, d: &Vector3<f64>, radius: f64) -> Option<(f64, f64)> {
-    ball(&Vector3::new(o.x, 0.0, o.z), &Vector3::new(d.x, 0.0, d.z), radius)
+    ball(
+        &Vector3::new(o.x, 0.0, o.z),
+        &Vector3::new(d.x, 0.0, d.z),
+        radius,
+    )
 }
 
 impl Segment {
@@ -224,10 +227,13 @@ impl Segment {
             let k = ry / r;
             let m = Vector3::new(origin.x * k, origin.y - cy, origin.z);
             let d = Vector3::new(dir.x * k, dir.y, dir.z);
-            consider(&mut best, ball(&m, &d, ry).and_then(|(a, b)| {
-                let (c, e) = slab(origin.y, dir.y, lo, hi)?;
-                Some((a.max(c), b.min(e)))
-            }));
+            consider(
+                &mut best,
+                ball(&m, &d, ry).and_then(|(a, b)| {
+                    let (c, e) = slab(origin.y, dir.y, lo, hi)?;
+                    Some((a.max(c), b.min(e)))
+                }),
+            );
         }
         if l > 0.0 {
             let side = self.cast_local_side(origin, dir, max_s.min(best));
