@@ -244,7 +244,7 @@ impl CylinderRaster {
 /// the camera (then the caller scans the whole image).
 fn sphere_rect(camera: &Intrinsics, c: &Vector3<f64>, radius: f64) -> Option<Rect> {
     let rad = radius * (1.0 + 1e-9) + 1e-9;
-    if !(c.z > rad) {
+    if c.z.is_nan() || c.z <= rad {
         return None;
     }
     // Tangent lines x = m·z of the circle (c.x, c.z; rad) in the xz-plane, and likewise in yz:

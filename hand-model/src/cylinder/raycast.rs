@@ -119,8 +119,7 @@ fn roots_in(p: &Poly, deg: usize, lo: f64, hi: f64, out: &mut [f64; 4]) -> usize
     let nc = roots_in(&dp, deg - 1, lo, hi, &mut crit);
     let mut x0 = lo;
     let mut f0 = eval(p, deg, lo);
-    for k in 0..=nc {
-        let x1 = if k < nc { crit[k] } else { hi };
+    for x1 in crit[..nc].iter().copied().chain(std::iter::once(hi)) {
         let f1 = eval(p, deg, x1);
         if f0 == 0.0 {
             if n == 0 || out[n - 1] < x0 {
@@ -167,7 +166,7 @@ fn ball(m: &Vector3<f64>, d: &Vector3<f64>, radius: f64) -> Option<(f64, f64)> {
     }
     let sc = -m.dot(d) / a;
     let h2 = radius * radius - (m + d * sc).norm_squared();
-    if !(h2 >= 0.0) {
+    if h2.is_nan() || h2 < 0.0 {
         return None;
     }
     let half = (h2 / a).sqrt();
@@ -251,14 +250,14 @@ impl Segment {
     ) -> Option<(f64, f64)> {
         let l = self.length;
         let reach = self.r1.max(self.r2).max(self.r1y).max(self.r2y);
-        if !(reach > 0.0) {
+        if reach.is_nan() || reach <= 0.0 {
             return None;
         }
         let (a0, b0) = slab(o.y, d.y, 0.0, l)?;
         let (a1, b1) = tube(o, d, reach)?;
         let sa = a0.max(a1).max(0.0);
         let sb = b0.min(b1).min(max_s);
-        if !(sa <= sb) {
+        if sa.is_nan() || sb.is_nan() || sa > sb {
             return None;
         }
         let span = sb - sa;
