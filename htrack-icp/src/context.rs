@@ -1,9 +1,12 @@
 //! The per-iteration context of the Ch. 2 tracker (STYLE practice 5): the posed cylinder model,
 //! the sensor points and their front-facing correspondences (thesis §2.3.1 "3D
-//! correspondences") with one IRLS weight each (§2.7.4 "Point cloud alignment").
+//! correspondences") with one IRLS weight each (§2.7.4 "Point cloud alignment"), and the
+//! rendered silhouette `S_r` of the model with its per-pixel bone and 3D point (§2.3.1 "2D
+//! correspondences", Eq. 2.3).
 
-use hand_model::cylinder::{CylinderModel, CylinderProjection, View};
+use hand_model::cylinder::{CylinderModel, CylinderProjection, CylinderRaster, View};
 use hand_model::kinematics::{Pose, PosedSkeleton, Skeleton};
+use hand_model::render::Intrinsics;
 use hand_model::solver::{IterInfo, LmCallback, PoseContext, TermError};
 use nalgebra::Vector3;
 use sensor_io::dt::NO_PIXEL;
@@ -99,8 +102,14 @@ impl IrlsParams {
 /// and its forward kinematics, the sensor point cloud `𝒳_s` (camera frame, mm), for every point
 /// its front-facing correspondence `y = Π_M(x, θ)` (§2.3.1) and its IRLS weight (§2.7.4).
 ///
+/// With a sensor camera ([`SensorView::camera`]) and the silhouette enabled
+/// ([`TrackingCtx::set_silhouette`], on by default) it also holds the rendered silhouette `S_r`
+/// of the model (§2.3.1 "2D correspondences"): the posed model rasterized from the sensor camera
+/// ([`CylinderRaster`]), per pixel the segment, its bone and the camera-frame surface point.
+///
 /// Refreshed by [`TrackingCtx::update`] (called by [`CorrespondenceCallback`] before every LM
-/// iteration); nothing allocates once the buffers have held the current number of points.
+/// iteration); nothing allocates once the buffers have held the current number of points and
+/// image size.
 #[derive(Clone, Debug)]
 pub struct TrackingCtx<'m> {
     model: &'m CylinderModel,
@@ -116,6 +125,8 @@ pub struct TrackingCtx<'m> {
     front_facing: bool,
     irls: IrlsParams,
     sensor: SensorView,
+    silhouette: bool,
+    raster: CylinderRaster,
 }
 
 /// What the image-space terms (E2D Eq. 2.3, E_wrist Eq. 2.4) read of the current frame: the
@@ -176,7 +187,31 @@ impl<'m> TrackingCtx<'m> {
             front_facing: true,
             irls,
             sensor: SensorView::default(),
+            silhouette: true,
+            raster: CylinderRaster::new(),
         }
+    }
+
+    /// Enable or disable the rendering of the silhouette `S_r` in [`TrackingCtx::update`] (on by
+    /// default; rendering also needs a sensor camera). Disabled, [`TrackingCtx::raster`] is
+    /// empty after the next update and E2D adds no rows.
+    pub fn set_silhouette(&mut self, enabled: bool) {
+        self.silhouette = enabled;
+        if !enabled {
+            self.raster.clear();
+        }
+    }
+
+    /// Whether [`TrackingCtx::update`] renders the silhouette.
+    pub fn silhouette(&self) -> bool {
+        self.silhouette
+    }
+
+    /// The rendered model at the last update (§2.3.1 "2D correspondences"): per pixel of the
+    /// sensor camera the segment, bone and camera-frame point of the first hit; empty without a
+    /// camera, with the silhouette disabled or for a non-finite pose.
+    pub fn raster(&self) -> &CylinderRaster {
+        &self.raster
     }
 
     /// Take the sensor data of a preprocessed frame: its points `𝒳_s` ([`TrackingCtx::set_points`]),
@@ -223,8 +258,9 @@ impl<'m> TrackingCtx<'m> {
 
     /// Re-pose the model at `pose`, recompute every front-facing correspondence `y` (§2.3.1),
     /// its point-to-plane residual `r = nᵀ(y − x)` and its IRLS weight (§2.7.4; 1 when the
-    /// iteration is not reweighted, see [`IrlsParams`]). A pose of the wrong length is an error;
-    /// a non-finite pose value makes every correspondence `None`.
+    /// iteration is not reweighted, see [`IrlsParams`]), and render the silhouette `S_r` from the
+    /// sensor camera when enabled. A pose of the wrong length is an error; a non-finite pose
+    /// value makes every correspondence `None` and the silhouette empty.
     pub fn update(&mut self, pose: &Pose, rigid_only: bool) -> Result<(), TermError> {
         let nd = self.model.skeleton.num_dofs();
         if pose.values.len() != nd {
@@ -238,9 +274,30 @@ impl<'m> TrackingCtx<'m> {
         self.reweighted = self.irls.reweight && (!rigid_only || self.irls.reweight_rigid);
         if !pose.values.iter().all(|v| v.is_finite()) {
             self.correspondences.fill(None);
+            self.raster.clear();
             return Ok(());
         }
         self.posed.update(&self.model.skeleton, &self.pose);
+        match (&self.sensor.camera, self.silhouette) {
+            (Some(c), true) => {
+                let intrinsics = Intrinsics {
+                    fx: c.fx,
+                    fy: c.fy,
+                    cx: c.cx,
+                    cy: c.cy,
+                    width: c.width,
+                    height: c.height,
+                };
+                if self
+                    .raster
+                    .render(self.model, &self.posed, &intrinsics)
+                    .is_err()
+                {
+                    return Err(TermError::Failed("invalid sensor camera"));
+                }
+            }
+            _ => self.raster.clear(),
+        }
         if self
             .model
             .project_points(

@@ -5,15 +5,19 @@
 //! rigid-first iteration.
 //!
 //! - [`TrackingCtx`]: the per-iteration context (posed model, sensor points, front-facing
-//!   correspondences of §2.3.1, IRLS weights of §2.7.4), refreshed by
-//!   [`CorrespondenceCallback`];
+//!   correspondences of §2.3.1, IRLS weights of §2.7.4, the model rendered from the sensor
+//!   camera for §2.3.1 "2D correspondences" and the sensor silhouette's distance transform in
+//!   [`SensorView`]), refreshed by [`CorrespondenceCallback`];
 //! - [`terms::E3d`]: the point cloud alignment term (Eq. 2.2) as point-to-plane rows with ℓ1
 //!   IRLS weights ([`IrlsParams`]);
+//! - [`terms::E2d`]: the silhouette term (Eq. 2.3): every rendered pixel outside the sensor
+//!   silhouette is pushed toward its nearest silhouette pixel, two pixel rows with the
+//!   projection Jacobian of §2.7.2; the rendering is
+//!   [`hand_model::cylinder::CylinderRaster`] (exact ray casting of the segments);
 //! - [`synthetic`]: ray-marched point clouds of the posed model for tests.
 //!
-//! Not built yet (issue 4): E2D (Eq. 2.3; needs the cylinder silhouette rasterizer and will take
-//! the sensor silhouette's distance transform from `sensor_io::dt`), the wrist term (Eq. 2.4),
-//! collisions (Eq. 2.7), the tracking loop and `hands track`.
+//! Not built yet (issue 4): the wrist term (Eq. 2.4), collisions (Eq. 2.7), the tracking loop
+//! and `hands track`.
 //! The priors (joint limits, damping, temporal, PCA pose prior) are the shared terms of
 //! [`hand_model::solver::terms`], which run on [`TrackingCtx`] through
 //! [`hand_model::solver::PoseContext`].
@@ -25,6 +29,8 @@ mod tracker;
 
 #[cfg(test)]
 mod tests;
+#[cfg(test)]
+mod tests_e2d;
 
 pub use context::{CorrespondenceCallback, IrlsParams, SensorView, TrackingCtx};
 pub use tracker::{EnabledTerms, FrameStats, LossParams, Tracker, TrackerConfig, TrackerError};

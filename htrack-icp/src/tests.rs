@@ -13,7 +13,7 @@ use crate::terms::E3d;
 use crate::{CorrespondenceCallback, IrlsParams, TrackingCtx};
 
 /// A 320×240 depth camera (htrack's resolution).
-fn camera() -> Intrinsics {
+pub(crate) fn camera() -> Intrinsics {
     Intrinsics {
         fx: 300.0,
         fy: 300.0,
@@ -26,7 +26,7 @@ fn camera() -> Intrinsics {
 
 /// The pose that produces the synthetic data: hand 40 cm in front of the camera, palm toward
 /// it, a few fingers bent.
-fn target_pose(model: &CylinderModel) -> Pose {
+pub(crate) fn target_pose(model: &CylinderModel) -> Pose {
     Pose::from_named(
         &model.skeleton,
         [

@@ -8,6 +8,9 @@
 //!
 //! - [`query`]: closest points (Eq. 2.2's projection `Π_M`) and the front-facing correspondences
 //!   of §2.3.1 "3D correspondences".
+//! - [`raycast`]: exact first hit of a ray with a segment ([`Segment::cast_local_ray`]).
+//! - [`raster`]: the CPU rasterizer of the rendered silhouette `S_r` of Eq. 2.3 (§2.3.1 "2D
+//!   correspondences"): per pixel the segment, bone and camera-frame surface point.
 //! - [`default_right_hand_cylinders`]: the project's own right-hand template with the proportions
 //!   of the htrack default model.
 //! - [`CylinderModel::from_sphere_mesh`]: a cylinder model fitted to a sphere-mesh template
@@ -35,8 +38,11 @@ mod default;
 mod fit;
 mod model;
 pub mod query;
+pub mod raster;
+pub mod raycast;
 
 pub use calib::{load_htrack_calib, parse_htrack_calib, HTRACK_PALM_OFFSET, HTRACK_THETA_LAYOUT};
 pub use default::default_right_hand_cylinders;
 pub use model::{CylinderKeypoint, CylinderModel, Segment, CYLINDER_DOF_NAMES};
 pub use query::{CylinderPart, CylinderProjection, View};
+pub use raster::{CylinderRaster, RasterHit, NO_SEGMENT};
