@@ -33,7 +33,7 @@ use sensor_io::record::HandRecord;
 use serde::{Deserialize, Serialize};
 
 use crate::context::{IrlsParams, TrackingCtx};
-use crate::terms::{E3d, E3dParams};
+use crate::terms::{E2d, E2dParams, E3d, E3dParams};
 
 /// Which terms of Eq. 2.1 take part (the `--no-<term>` switches of `hands track`).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -41,6 +41,8 @@ use crate::terms::{E3d, E3dParams};
 pub struct EnabledTerms {
     /// E3D (Eq. 2.2).
     pub e3d: bool,
+    /// E2D (Eq. 2.3); needs a sensor camera in the frame.
+    pub e2d: bool,
     /// E_pose (Eq. 2.5–2.6); needs a prior.
     pub pose_prior: bool,
     /// E_bounds (Eq. 2.8).
@@ -53,6 +55,7 @@ impl Default for EnabledTerms {
     fn default() -> Self {
         Self {
             e3d: true,
+            e2d: true,
             pose_prior: true,
             joint_limits: true,
             temporal: true,
@@ -102,6 +105,8 @@ pub struct TrackerConfig {
     pub enabled: EnabledTerms,
     /// ω₁.
     pub e3d: E3dParams,
+    /// ω₂.
+    pub e2d: E2dParams,
     /// ω₄, ω₅ and the form of the PCA prior.
     pub pose_prior: PosePriorParams,
     /// ω₇.
@@ -125,6 +130,7 @@ impl Default for TrackerConfig {
             irls: IrlsParams::default(),
             enabled: EnabledTerms::default(),
             e3d: E3dParams::default(),
+            e2d: E2dParams::default(),
             pose_prior: PosePriorParams::default(),
             joint_limits: JointLimitsParams::default(),
             temporal: TemporalParams::default(),
@@ -198,6 +204,7 @@ const MAX_TERMS: usize = 8;
 struct Terms {
     enabled: EnabledTerms,
     e3d: E3d,
+    e2d: E2d,
     limits: JointLimits,
     temporal: Temporal,
     prior: Option<PosePrior>,
@@ -216,6 +223,9 @@ impl Terms {
         let e = &self.enabled;
         if e.e3d {
             push(&self.e3d);
+        }
+        if e.e2d {
+            push(&self.e2d);
         }
         if e.temporal {
             push(&self.temporal);
@@ -260,6 +270,7 @@ impl<'m> Tracker<'m> {
         let sk = &model.skeleton;
         let mut ctx = TrackingCtx::new(model, View::Orthographic, config.irls.clone());
         ctx.set_front_facing(config.front_facing);
+        ctx.set_silhouette(config.enabled.e2d);
         let pose_prior = prior
             .map(|p| PosePrior::new(sk, p, &config.pose_prior))
             .transpose()?;
@@ -275,6 +286,7 @@ impl<'m> Tracker<'m> {
         let terms = Terms {
             enabled: config.enabled.clone(),
             e3d: E3d::new(config.e3d.clone()),
+            e2d: E2d::new(config.e2d.clone()),
             limits: JointLimits::new(sk, &config.joint_limits),
             temporal: Temporal::new(cylinder_points(model), &config.temporal),
             prior: pose_prior,

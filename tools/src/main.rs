@@ -4,6 +4,7 @@ mod convert;
 mod demo;
 mod model;
 mod progress;
+mod report;
 mod synth;
 mod track;
 
@@ -43,6 +44,9 @@ enum Command {
     /// Track a depth sequence and write the per-frame pose, keypoints, energies and timings.
     #[command(after_help = "Example: hands track seq.mcap --model cylinders --out track.jsonl")]
     Track(track::TrackArgs),
+    /// Write a reproduction report (markdown + SVG plots) from synthetic ground truth.
+    #[command(after_help = "Example: hands report ch2 --out docs/ch2 --frames 300")]
+    Report(report::ReportArgs),
 }
 
 fn main() -> anyhow::Result<()> {
@@ -53,5 +57,6 @@ fn main() -> anyhow::Result<()> {
         Command::Convert(args) => convert::run(args),
         Command::Synth(args) => synth::run(args),
         Command::Track(args) => track::run(args),
+        Command::Report(args) => report::run(args),
     }
 }

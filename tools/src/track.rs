@@ -24,8 +24,9 @@ use sensor_io::record::HandRecord;
 pub struct TrackArgs {
     /// Input sequence: a folder or an `.mcap` file (see `hands synth`, `hands convert`).
     pub sequence: PathBuf,
-    /// Tracking model: `cylinders` (the Ch. 2 tracker with the default cylinder model) or an
-    /// htrack `.calib` file.
+    /// Tracking model (the Ch. 2 cylinder tracker): `cylinders` (the default cylinder model), an
+    /// htrack `.calib` file, a sphere-mesh template `.json` or `subject:<name>` (a `hands synth`
+    /// subject) — the last two give the cylinder model fitted to that sphere-mesh.
     #[arg(long, default_value = "cylinders")]
     pub model: String,
     /// Output: `.jsonl` (one JSON object per frame, DESIGN.md "Tracker output").
@@ -55,6 +56,9 @@ pub struct TrackArgs {
     /// Disable the 3D point-to-model term (Eq. 2.2).
     #[arg(long)]
     pub no_e3d: bool,
+    /// Disable the 2D silhouette term (Eq. 2.3).
+    #[arg(long)]
+    pub no_e2d: bool,
     /// Disable the PCA pose prior (Eq. 2.5–2.6).
     #[arg(long)]
     pub no_pose_prior: bool,
@@ -71,8 +75,18 @@ fn load_model(name: &str) -> Result<CylinderModel> {
     match name {
         "cylinders" | "default-cylinders" => Ok(default_right_hand_cylinders()),
         p if p.ends_with(".calib") => Ok(hand_model::cylinder::load_htrack_calib(Path::new(p))?),
+        p if p.ends_with(".json") => {
+            let t = hand_model::spheremesh::SphereMeshTemplate::load(Path::new(p))?;
+            Ok(CylinderModel::from_sphere_mesh(&t)?)
+        }
+        p if p.starts_with("subject:") => {
+            let subject = datasets::subject_by_name(&p["subject:".len()..], 7)?;
+            let base = hand_model::spheremesh::default_right_hand();
+            let basis = hand_model::spheremesh::ShapeBasis::honline(&base)?;
+            Ok(CylinderModel::from_sphere_mesh(&basis.apply(&base, &subject.beta)?)?)
+        }
         other => bail!(
-            "unknown --model `{other}`: use `cylinders` or an htrack .calib file (the sphere-mesh \
+            "unknown --model `{other}`: use `cylinders`, an htrack .calib file, a sphere-mesh .json or subject:<name> (the sphere-mesh \
              tracker is issue 5)"
         ),
     }
@@ -105,6 +119,7 @@ fn tracker_config(args: &TrackArgs) -> Result<TrackerConfig> {
     }
     let e = &mut cfg.enabled;
     e.e3d &= !args.no_e3d;
+    e.e2d &= !args.no_e2d;
     e.pose_prior &= !args.no_pose_prior;
     e.joint_limits &= !args.no_joint_limits;
     e.temporal &= !args.no_temporal;

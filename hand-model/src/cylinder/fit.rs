@@ -58,6 +58,28 @@ impl CylinderModel {
     /// `<digit>_base/bottom/middle/top`, a palm bone without spheres, or a tip keypoint whose
     /// sphere does not ride on the keypoint's bone (the tip would not be rigid on one bone).
     pub fn from_sphere_mesh(template: &SphereMeshTemplate) -> Result<CylinderModel> {
+        fit(template, false)
+    }
+
+    /// As [`CylinderModel::from_sphere_mesh`], plus a **wrist segment** fitted to the spheres of
+    /// the template's `wrist` bone (the forearm stub the sphere-mesh models also have: hmodel's
+    /// wrist blocks, honline's separately fitted wrist pixels, ANCHOR-FACTS §5.3/§5.6). It rides
+    /// on an extra DOF-less bone `forearm`, a child of `wrist` whose +y points down the arm, so
+    /// the two wrist DOFs are kept (28 DOFs for the default templates).
+    ///
+    /// Why: the wristband segmentation keeps the forearm between the band and the wrist
+    /// (htrack's cut lies 30 mm above the band). A model without a wrist cannot explain those
+    /// points; on our synthetic sequences they are a fifth of the cloud, all on one side, and
+    /// even the ℓ1 data term then drags the hand ~20 mm toward the arm. With the wrist segment
+    /// they are explained instead of resisted. Templates without wrist spheres get no segment.
+    pub fn from_sphere_mesh_with_wrist(template: &SphereMeshTemplate) -> Result<CylinderModel> {
+        fit(template, true)
+    }
+}
+
+/// [`CylinderModel::from_sphere_mesh`] with or without the wrist segment.
+fn fit(template: &SphereMeshTemplate, with_wrist: bool) -> Result<CylinderModel> {
+    {
         let source = Path::new(SOURCE);
         let sk = &template.skeleton;
         let rest = sk.rest_globals();
@@ -151,7 +173,15 @@ impl CylinderModel {
             });
         }
 
-        let skeleton = drop_idle_dofs(sk, &segments, source)?;
+        let mut bones = sk.bones().to_vec();
+        if with_wrist {
+            if let Some(seg) = wrist_segment(template, bones.len()) {
+                bones.push(seg.0);
+                segments.push(seg.1);
+            }
+        }
+        let full = Skeleton::new(bones, sk.dofs().to_vec(), source)?;
+        let skeleton = drop_idle_dofs(&full, &segments, source)?;
         let model = CylinderModel {
             name: format!("{} (cylinders)", template.name),
             handedness: template.handedness,
@@ -162,6 +192,9 @@ impl CylinderModel {
         model.validate(source)?;
         Ok(model)
     }
+}
+
+impl CylinderModel {
 
     /// This model's pose for a pose of another skeleton (e.g. the sphere-mesh template it was
     /// fitted to), matched by DOF name: DOFs the other skeleton lacks stay 0, the other's extra
@@ -175,6 +208,56 @@ impl CylinderModel {
         }
         out
     }
+}
+
+/// The wrist segment of [`CylinderModel::from_sphere_mesh_with_wrist`]: a DOF-less bone (index
+/// `index`) under `wrist`, at the highest wrist sphere and pointing down the arm (rest rotation
+/// π about z), carrying an elliptical segment sized like the palm's from the spheres attached to
+/// `wrist`: widths `|x| + r` at the top and bottom, thicknesses `|z| + r`.
+fn wrist_segment(template: &SphereMeshTemplate, index: usize) -> Option<(Bone, Segment)> {
+    let wrist = template.skeleton.bone_index("wrist")?;
+    let spheres: Vec<(Vector3<f64>, f64)> = template
+        .spheres
+        .iter()
+        .filter_map(|s| match s.attachment {
+            Attachment::Bone { bone, offset } if bone == wrist => Some((offset, s.radius)),
+            _ => None,
+        })
+        .collect();
+    let top = spheres.iter().map(|(c, _)| c.y).fold(f64::NEG_INFINITY, f64::max);
+    let bottom = spheres.iter().map(|(c, _)| c.y).fold(f64::INFINITY, f64::min);
+    if !(top.is_finite() && bottom.is_finite() && top > bottom) {
+        return None;
+    }
+    let extent = |y: f64| {
+        spheres
+            .iter()
+            .filter(|(c, _)| (c.y - y).abs() < 1e-9)
+            .fold((0.0f64, 0.0f64), |(w, t), (c, r)| {
+                (w.max(c.x.abs() + r), t.max(c.z.abs() + r))
+            })
+    };
+    let (r1, r1y) = extent(top);
+    let (r2, r2y) = extent(bottom);
+    let rest = Rigid3::new(
+        crate::math::axis_angle(&Vector3::z(), std::f64::consts::PI),
+        Vector3::new(0.0, top, 0.0),
+    );
+    let bone = Bone {
+        name: "forearm".into(),
+        parent: Some(wrist),
+        rest,
+        dofs: Vec::new(),
+    };
+    let segment = Segment {
+        bone: index,
+        length: top - bottom,
+        r1: r1.max(1e-3),
+        r2: r2.max(1e-3),
+        r1y: r1y.max(1e-3),
+        r2y: r2y.max(1e-3),
+    };
+    Some((bone, segment))
 }
 
 /// Rest center (model frame) and radius of sphere `i` (blends blend their parts).
