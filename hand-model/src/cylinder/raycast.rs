@@ -21,8 +21,9 @@
 //!   used instead. A closed form of the quartic (Ferrari) is badly conditioned near double roots
 //!   (grazing rays, which every silhouette boundary has), so its roots are isolated instead:
 //!   the roots of the derivative split the interval into monotone pieces (recursively, down to
-//!   a linear polynomial) and each sign change is solved by safeguarded Newton (bisection
-//!   fallback), which converges to full precision. The ray is first clipped to the slab
+//!   a quadratic solved by the cancellation-free closed form) and each sign change is solved by
+//!   safeguarded Newton (bisection fallback), which converges to full precision; only the first
+//!   root is refined unless it is rejected. The ray is first clipped to the slab
 //!   `0 ≤ y ≤ length` and to the bounding cylinder `x² + z² ≤ max(radii)²`, and the polynomial
 //!   is expanded about the clipped start, so its coefficients stay well scaled even with the
 //!   camera 40 cm away. A root where a radius vanishes (a cone tip, where `P` vanishes for
