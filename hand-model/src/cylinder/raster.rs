@@ -5,7 +5,7 @@
 //! htrack draws the cylinders with OpenGL into a joint-id texture and a camera-space xyz texture
 //! (ANCHOR-FACTS §5.4). Here every pixel's ray through its center (pinhole
 //! [`Intrinsics`], DESIGN.md camera frame, y down) is cast exactly against the segments
-//! ([`Segment::cast_local_ray`]: closed-form caps, root-isolated side, see [`super::raycast`]),
+//! ([`Segment::cast_local_ray`](super::Segment::cast_local_ray): closed-form caps, root-isolated side, see [`super::raycast`]),
 //! and the first hit is kept, with its segment and the camera-frame surface point. Each segment
 //! only scans its projected bounding rectangle: the exact screen rectangles of the two spheres of
 //! radius `max(r1, r2, r1y, r2y)` around its axis end points, which enclose its projection (the
@@ -69,6 +69,7 @@ pub struct CylinderRaster {
     point: Vec<Vector3<f64>>,
     hits: Vec<u32>,
     bones: Vec<usize>,
+    order: Vec<(f64, usize)>,
     dirty: Option<Rect>,
 }
 
@@ -164,7 +165,20 @@ impl CylinderRaster {
             return Ok(0);
         }
         let (w, h) = (camera.width, camera.height);
-        for (si, seg) in model.segments.iter().enumerate() {
+        // Front to back (by the nearest depth of the bounding capsule), so that the depth test
+        // rejects most occluded rays at the capsule check.
+        self.order.clear();
+        self.order
+            .extend(model.segments.iter().enumerate().map(|(si, seg)| {
+                let g = &posed.globals[seg.bone];
+                let reach = seg.r1.max(seg.r2).max(seg.r1y).max(seg.r2y);
+                let end = g.transform_point(&seg.end_local());
+                (g.translation.z.min(end.z) - reach, si)
+            }));
+        self.order.sort_unstable_by(|a, b| a.0.total_cmp(&b.0));
+        for k in 0..self.order.len() {
+            let si = self.order[k].1;
+            let seg = &model.segments[si];
             let g = &posed.globals[seg.bone];
             let rt = g.rotation.transpose();
             let origin = -(rt * g.translation);

@@ -21,8 +21,9 @@
 //!   used instead. A closed form of the quartic (Ferrari) is badly conditioned near double roots
 //!   (grazing rays, which every silhouette boundary has), so its roots are isolated instead:
 //!   the roots of the derivative split the interval into monotone pieces (recursively, down to
-//!   a linear polynomial) and each sign change is solved by safeguarded Newton (bisection
-//!   fallback), which converges to full precision. The ray is first clipped to the slab
+//!   a quadratic solved by the cancellation-free closed form) and each sign change is solved by
+//!   safeguarded Newton (bisection fallback), which converges to full precision; only the first
+//!   root is refined unless it is rejected. The ray is first clipped to the slab
 //!   `0 ≤ y ≤ length` and to the bounding cylinder `x² + z² ≤ max(radii)²`, and the polynomial
 //!   is expanded about the clipped start, so its coefficients stay well scaled even with the
 //!   camera 40 cm away. A root where a radius vanishes (a cone tip, where `P` vanishes for
@@ -94,29 +95,59 @@ fn solve_monotone(p: &Poly, dp: &Poly, deg: usize, mut a: f64, mut b: f64, fa: f
     x
 }
 
-/// All roots of `p` (degree `deg ≤ 4`) in `[lo, hi]` in increasing order: the sign changes
-/// between consecutive critical points (and the exact zeros at them). At most `deg` roots.
-fn roots_in(p: &Poly, deg: usize, lo: f64, hi: f64, out: &mut [f64; 4]) -> usize {
+/// The real roots of `a u² + b u + c` in `[lo, hi]`, increasing, by the cancellation-free
+/// formula (`q = −(b + sign(b)√Δ)/2`, roots `q/a` and `c/q`); linear when `a = 0`.
+fn quadratic_roots_in(c: f64, b: f64, a: f64, lo: f64, hi: f64, out: &mut [f64; 4]) -> usize {
+    let mut n = 0;
+    let mut push = |u: f64, n: &mut usize| {
+        if (lo..=hi).contains(&u) {
+            out[*n] = u;
+            *n += 1;
+        }
+    };
+    if a == 0.0 {
+        if b != 0.0 {
+            push(-c / b, &mut n);
+        } else if c == 0.0 {
+            push(lo, &mut n);
+        }
+        return n;
+    }
+    let disc = b * b - 4.0 * a * c;
+    if disc < 0.0 {
+        return 0;
+    }
+    let q = -0.5 * (b + b.signum() * disc.sqrt());
+    if q == 0.0 {
+        // b = 0 and c = 0: a double root at 0.
+        push(0.0, &mut n);
+        return n;
+    }
+    let (r0, r1) = (q / a, c / q);
+    let (r0, r1) = if r0 <= r1 { (r0, r1) } else { (r1, r0) };
+    push(r0, &mut n);
+    if r1 != r0 {
+        push(r1, &mut n);
+    }
+    n
+}
+
+/// All roots of `p` (degree `deg ≤ 4`) in `[lo, hi]` in increasing order: closed form up to
+/// degree 2; above, the sign changes between consecutive critical points (and the exact zeros
+/// at them). At most `deg` roots, and at most `max` (the first ones).
+fn roots_in(p: &Poly, deg: usize, lo: f64, hi: f64, max: usize, out: &mut [f64; 4]) -> usize {
+    let max = max.min(4);
     let mut n = 0;
     if deg == 0 || lo > hi {
         return 0;
     }
-    if deg == 1 {
-        if p[1] != 0.0 {
-            let u = -p[0] / p[1];
-            if (lo..=hi).contains(&u) {
-                out[0] = u;
-                n = 1;
-            }
-        } else if p[0] == 0.0 {
-            out[0] = lo;
-            n = 1;
-        }
-        return n;
+    if deg <= 2 {
+        let a = if deg == 2 { p[2] } else { 0.0 };
+        return quadratic_roots_in(p[0], p[1], a, lo, hi, out);
     }
     let dp = derivative(p, deg);
     let mut crit = [0.0; 4];
-    let nc = roots_in(&dp, deg - 1, lo, hi, &mut crit);
+    let nc = roots_in(&dp, deg - 1, lo, hi, 4, &mut crit);
     let mut x0 = lo;
     let mut f0 = eval(p, deg, lo);
     for x1 in crit[..nc].iter().copied().chain(std::iter::once(hi)) {
@@ -126,17 +157,17 @@ fn roots_in(p: &Poly, deg: usize, lo: f64, hi: f64, out: &mut [f64; 4]) -> usize
                 out[n] = x0;
                 n += 1;
             }
-        } else if f1 != 0.0 && (f0 < 0.0) != (f1 < 0.0) && n < 4 {
+        } else if f1 != 0.0 && (f0 < 0.0) != (f1 < 0.0) {
             out[n] = solve_monotone(p, &dp, deg, x0, x1, f0);
             n += 1;
         }
-        if n == 4 {
+        if n >= max {
             return n;
         }
         x0 = x1;
         f0 = f1;
     }
-    if f0 == 0.0 && (n == 0 || out[n - 1] < x0) && n < 4 {
+    if f0 == 0.0 && (n == 0 || out[n - 1] < x0) && n < max {
         out[n] = x0;
         n += 1;
     }
@@ -308,8 +339,13 @@ impl Segment {
         if eval(&p, deg, 0.0) <= 0.0 && on_section(0.0) {
             return Some((sa, sb));
         }
+        // Usually the first root is the entry; a root at a cone tip is not, then look further.
         let mut roots = [0.0; 4];
-        let n = roots_in(&p, deg, 0.0, span, &mut roots);
+        let n = roots_in(&p, deg, 0.0, span, 1, &mut roots);
+        if n >= 1 && on_section(roots[0]) {
+            return Some((sa + roots[0], sb));
+        }
+        let n = roots_in(&p, deg, 0.0, span, 4, &mut roots);
         roots[..n]
             .iter()
             .find(|&&u| on_section(u))
@@ -334,15 +370,18 @@ mod tests {
             2,
         );
         let mut out = [0.0; 4];
-        let n = roots_in(&p, 4, 0.0, 5.0, &mut out);
+        let n = roots_in(&p, 4, 0.0, 5.0, 4, &mut out);
         assert_eq!(n, 3, "{out:?}");
         for (got, want) in out.iter().zip([1.0, 1.001, 3.0]) {
             assert!((got - want).abs() < 1e-12, "{got} vs {want}");
         }
         // A double root touching zero is found when exact.
         let q = mul(&lin(2.0), 1, &lin(2.0), 1);
-        assert_eq!(roots_in(&q, 2, 0.0, 5.0, &mut out), 1);
+        assert_eq!(roots_in(&q, 2, 0.0, 5.0, 4, &mut out), 1);
         assert_eq!(out[0], 2.0);
+        // Only the first root when asked.
+        assert_eq!(roots_in(&p, 4, 0.0, 5.0, 1, &mut out), 1);
+        assert!((out[0] - 1.0).abs() < 1e-12);
     }
 
     /// Brute-force first hit: march with `contains_local_point`, bisect to 1e-11.
