@@ -124,7 +124,7 @@ fn experiments() -> Vec<Experiment> {
 
 /// The tracking model of a synthetic subject: the cylinder model fitted to its sphere-mesh.
 fn tracking_model(template: &SphereMeshTemplate) -> Result<CylinderModel> {
-    Ok(CylinderModel::from_sphere_mesh(template)?)
+    Ok(CylinderModel::from_sphere_mesh_with_wrist(template)?)
 }
 
 /// The project's PCA pose prior.

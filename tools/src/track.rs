@@ -77,13 +77,13 @@ fn load_model(name: &str) -> Result<CylinderModel> {
         p if p.ends_with(".calib") => Ok(hand_model::cylinder::load_htrack_calib(Path::new(p))?),
         p if p.ends_with(".json") => {
             let t = hand_model::spheremesh::SphereMeshTemplate::load(Path::new(p))?;
-            Ok(CylinderModel::from_sphere_mesh(&t)?)
+            Ok(CylinderModel::from_sphere_mesh_with_wrist(&t)?)
         }
         p if p.starts_with("subject:") => {
             let subject = datasets::subject_by_name(&p["subject:".len()..], 7)?;
             let base = hand_model::spheremesh::default_right_hand();
             let basis = hand_model::spheremesh::ShapeBasis::honline(&base)?;
-            Ok(CylinderModel::from_sphere_mesh(&basis.apply(&base, &subject.beta)?)?)
+            Ok(CylinderModel::from_sphere_mesh_with_wrist(&basis.apply(&base, &subject.beta)?)?)
         }
         other => bail!(
             "unknown --model `{other}`: use `cylinders`, an htrack .calib file, a sphere-mesh .json or subject:<name> (the sphere-mesh \
