@@ -105,7 +105,9 @@ impl IrlsParams {
 /// With a sensor camera ([`SensorView::camera`]) and the silhouette enabled
 /// ([`TrackingCtx::set_silhouette`], on by default) it also holds the rendered silhouette `S_r`
 /// of the model (§2.3.1 "2D correspondences"): the posed model rasterized from the sensor camera
-/// ([`CylinderRaster`]), per pixel the segment, its bone and the camera-frame surface point.
+/// ([`CylinderRaster`]), per pixel the segment, its bone and the camera-frame surface point —
+/// only for the pixels outside the sensor silhouette `S_s` (`S_r \ S_s`, all E2D needs; the
+/// others are not ray cast).
 ///
 /// Refreshed by [`TrackingCtx::update`] (called by [`CorrespondenceCallback`] before every LM
 /// iteration); nothing allocates once the buffers have held the current number of points and
@@ -288,9 +290,12 @@ impl<'m> TrackingCtx<'m> {
                     width: c.width,
                     height: c.height,
                 };
+                // Only pixels outside S_s can carry an E2D push constraint.
+                let nearest = &self.sensor.nearest;
+                let outside = |i: usize| nearest.get(i).is_none_or(|&n| n as usize != i);
                 if self
                     .raster
-                    .render(self.model, &self.posed, &intrinsics)
+                    .render_where(self.model, &self.posed, &intrinsics, outside)
                     .is_err()
                 {
                     return Err(TermError::Failed("invalid sensor camera"));
