@@ -4,6 +4,8 @@
 //! [`hand_model::solver::terms`] and run on the same context through
 //! [`hand_model::solver::PoseContext`].
 
+mod collision;
 mod e3d;
 
+pub use collision::{contact, Collision, CollisionPair, CollisionParams, PairContact};
 pub use e3d::{E3d, E3dParams};
