@@ -153,7 +153,7 @@ impl CylinderModel {
 
         let skeleton = drop_idle_dofs(sk, &segments, source)?;
         let model = CylinderModel {
-            name: format!("{} (cylinders)", template.name),
+            name: format!("{} (fitted cylinders)", template.name),
             handedness: template.handedness,
             skeleton,
             segments,

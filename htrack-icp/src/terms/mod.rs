@@ -6,6 +6,8 @@
 
 mod collision;
 mod e3d;
+mod wrist;
 
 pub use collision::{contact, Collision, CollisionPair, CollisionParams, PairContact};
 pub use e3d::{E3d, E3dParams};
+pub use wrist::{Wrist, WristParams};
