@@ -18,7 +18,10 @@ fn track(noise: &str, frames: usize) -> SyntheticRun {
     })
     .unwrap();
     let model = CylinderModel::from_sphere_mesh_with_wrist(seq.template()).unwrap();
-    let prior = htrack_icp::default_prior();
+    let prior = hand_model::solver::PcaPrior::load_htrack_dir(std::path::Path::new(
+        "../../shared/reference/htrack-pose-space-pca",
+    ))
+    .unwrap();
     let mut tracker = Tracker::new(&model, TrackerConfig::default(), Some(&prior)).unwrap();
     let run = seq
         .run(|f, t| tracker.track(f, t.frame, t.timestamp), |_| {})
@@ -52,6 +55,10 @@ fn teaser_noise_free() {
 fn teaser_tof_noise() {
     let run = track("tof", 600);
     let s = run.summary();
-    assert!(run.flag_fraction("lost") <= 0.05, "lost {}", run.flag_fraction("lost"));
+    assert!(
+        run.flag_fraction("lost") <= 0.05,
+        "lost {}",
+        run.flag_fraction("lost")
+    );
     assert!(s.mean < 8.0, "mean keypoint error {} mm", s.mean);
 }

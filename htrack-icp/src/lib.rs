@@ -21,6 +21,12 @@
 //! The priors (joint limits, damping, temporal, PCA pose prior) are the shared terms of
 //! [`hand_model::solver::terms`], which run on [`TrackingCtx`] through
 //! [`hand_model::solver::PoseContext`].
+//!
+//! The kinematic and wrist priors of §2.3.2: [`terms::Collision`] (E_collision, Eq. 2.7: the
+//! penetration of non-adjacent finger segments, exact Jacobian, global columns zero) and
+//! [`terms::Wrist`] (E_wrist, Eq. 2.4: the projected wrist keypoint on the image line of the
+//! wristband axis). [`hand_model::cylinder::CylinderModel::from_sphere_mesh`] gives the cylinder
+//! model of a sphere-mesh subject, whose keypoints coincide with the synthetic ground truth.
 
 mod context;
 pub mod synthetic;

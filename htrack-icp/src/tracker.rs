@@ -33,7 +33,9 @@ use sensor_io::record::HandRecord;
 use serde::{Deserialize, Serialize};
 
 use crate::context::{IrlsParams, TrackingCtx};
-use crate::terms::{E2d, E2dParams, E3d, E3dParams};
+use crate::terms::{
+    Collision, CollisionParams, E2d, E2dParams, E3d, E3dParams, Wrist, WristParams,
+};
 
 /// Which terms of Eq. 2.1 take part (the `--no-<term>` switches of `hands track`).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -43,6 +45,10 @@ pub struct EnabledTerms {
     pub e3d: bool,
     /// E2D (Eq. 2.3); needs a sensor camera in the frame.
     pub e2d: bool,
+    /// E_wrist (Eq. 2.4); needs a wristband in the frame.
+    pub wrist: bool,
+    /// E_collision (Eq. 2.7).
+    pub collision: bool,
     /// E_pose (Eq. 2.5–2.6); needs a prior.
     pub pose_prior: bool,
     /// E_bounds (Eq. 2.8).
@@ -56,6 +62,8 @@ impl Default for EnabledTerms {
         Self {
             e3d: true,
             e2d: true,
+            wrist: true,
+            collision: true,
             pose_prior: true,
             joint_limits: true,
             temporal: true,
@@ -107,6 +115,10 @@ pub struct TrackerConfig {
     pub e3d: E3dParams,
     /// ω₂.
     pub e2d: E2dParams,
+    /// ω₃.
+    pub wrist: WristParams,
+    /// ω₆.
+    pub collision: CollisionParams,
     /// ω₄, ω₅ and the form of the PCA prior.
     pub pose_prior: PosePriorParams,
     /// ω₇.
@@ -131,6 +143,8 @@ impl Default for TrackerConfig {
             enabled: EnabledTerms::default(),
             e3d: E3dParams::default(),
             e2d: E2dParams::default(),
+            wrist: WristParams::default(),
+            collision: CollisionParams::default(),
             pose_prior: PosePriorParams::default(),
             joint_limits: JointLimitsParams::default(),
             temporal: TemporalParams::default(),
@@ -205,6 +219,8 @@ struct Terms {
     enabled: EnabledTerms,
     e3d: E3d,
     e2d: E2d,
+    wrist: Wrist,
+    collision: Collision,
     limits: JointLimits,
     temporal: Temporal,
     prior: Option<PosePrior>,
@@ -227,8 +243,14 @@ impl Terms {
         if e.e2d {
             push(&self.e2d);
         }
+        if e.collision {
+            push(&self.collision);
+        }
         if e.temporal {
             push(&self.temporal);
+        }
+        if e.wrist {
+            push(&self.wrist);
         }
         if e.joint_limits {
             push(&self.limits);
@@ -287,6 +309,8 @@ impl<'m> Tracker<'m> {
             enabled: config.enabled.clone(),
             e3d: E3d::new(config.e3d.clone()),
             e2d: E2d::new(config.e2d.clone()),
+            wrist: Wrist::new(config.wrist.clone()),
+            collision: Collision::new(model, config.collision.clone()),
             limits: JointLimits::new(sk, &config.joint_limits),
             temporal: Temporal::new(cylinder_points(model), &config.temporal),
             prior: pose_prior,

@@ -313,7 +313,10 @@ fn write_plots(args: &ReportArgs, exp: &Experiment, o: &[Outcome]) -> Result<()>
         &per_frame,
         Some(60.0),
     )?;
-    write_atomic(&args.out.join(format!("{}-error.svg", exp.id)), svg.as_bytes())?;
+    write_atomic(
+        &args.out.join(format!("{}-error.svg", exp.id)),
+        svg.as_bytes(),
+    )?;
     let eps: Vec<f64> = (0..=50).map(f64::from).collect();
     let under: Vec<Series> = o
         .iter()
@@ -333,6 +336,9 @@ fn write_plots(args: &ReportArgs, exp: &Experiment, o: &[Outcome]) -> Result<()>
         &under,
         None,
     )?;
-    write_atomic(&args.out.join(format!("{}-under.svg", exp.id)), svg.as_bytes())?;
+    write_atomic(
+        &args.out.join(format!("{}-under.svg", exp.id)),
+        svg.as_bytes(),
+    )?;
     Ok(())
 }

@@ -59,6 +59,12 @@ pub struct TrackArgs {
     /// Disable the 2D silhouette term (Eq. 2.3).
     #[arg(long)]
     pub no_e2d: bool,
+    /// Disable the wristband term (Eq. 2.4).
+    #[arg(long)]
+    pub no_wrist: bool,
+    /// Disable the collision term (Eq. 2.7).
+    #[arg(long)]
+    pub no_collision: bool,
     /// Disable the PCA pose prior (Eq. 2.5–2.6).
     #[arg(long)]
     pub no_pose_prior: bool,
@@ -120,6 +126,8 @@ fn tracker_config(args: &TrackArgs) -> Result<TrackerConfig> {
     let e = &mut cfg.enabled;
     e.e3d &= !args.no_e3d;
     e.e2d &= !args.no_e2d;
+    e.wrist &= !args.no_wrist;
+    e.collision &= !args.no_collision;
     e.pose_prior &= !args.no_pose_prior;
     e.joint_limits &= !args.no_joint_limits;
     e.temporal &= !args.no_temporal;

@@ -183,7 +183,7 @@ fn fit(template: &SphereMeshTemplate, with_wrist: bool) -> Result<CylinderModel>
         let full = Skeleton::new(bones, sk.dofs().to_vec(), source)?;
         let skeleton = drop_idle_dofs(&full, &segments, source)?;
         let model = CylinderModel {
-            name: format!("{} (cylinders)", template.name),
+            name: format!("{} (fitted cylinders)", template.name),
             handedness: template.handedness,
             skeleton,
             segments,
@@ -195,7 +195,6 @@ fn fit(template: &SphereMeshTemplate, with_wrist: bool) -> Result<CylinderModel>
 }
 
 impl CylinderModel {
-
     /// This model's pose for a pose of another skeleton (e.g. the sphere-mesh template it was
     /// fitted to), matched by DOF name: DOFs the other skeleton lacks stay 0, the other's extra
     /// DOFs (the wrist DOFs) are ignored. `pose` must have one value per DOF of `other`.
@@ -224,8 +223,14 @@ fn wrist_segment(template: &SphereMeshTemplate, index: usize) -> Option<(Bone, S
             _ => None,
         })
         .collect();
-    let top = spheres.iter().map(|(c, _)| c.y).fold(f64::NEG_INFINITY, f64::max);
-    let bottom = spheres.iter().map(|(c, _)| c.y).fold(f64::INFINITY, f64::min);
+    let top = spheres
+        .iter()
+        .map(|(c, _)| c.y)
+        .fold(f64::NEG_INFINITY, f64::max);
+    let bottom = spheres
+        .iter()
+        .map(|(c, _)| c.y)
+        .fold(f64::INFINITY, f64::min);
     if !(top.is_finite() && bottom.is_finite() && top > bottom) {
         return None;
     }

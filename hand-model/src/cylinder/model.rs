@@ -241,6 +241,22 @@ impl CylinderModel {
         out
     }
 
+    /// Keypoint `k` as a point rigidly attached to a bone: `(bone, position in the bone frame)`,
+    /// so that its skeleton Jacobian is [`PosedSkeleton::for_each_column`] on that bone (e.g.
+    /// the wrist keypoint `k₀` of thesis Eq. 2.4). `None` when `k`, its bone or its segment is
+    /// out of range.
+    pub fn keypoint_on_bone(&self, k: usize) -> Option<(usize, Vector3<f64>)> {
+        let (bone, local) = match *self.keypoints.get(k)? {
+            CylinderKeypoint::Joint { bone } => (bone, Vector3::zeros()),
+            CylinderKeypoint::Tip { segment } => {
+                let s = self.segments.get(segment)?;
+                (s.bone, s.tip_local())
+            }
+            CylinderKeypoint::Point { bone, offset } => (bone, offset),
+        };
+        (bone < self.skeleton.bones().len()).then_some((bone, local))
+    }
+
     /// Which hand the rest geometry shows, whatever [`CylinderModel::handedness`] says.
     ///
     /// With `s` the vector from the little-finger base to the index base, `y` the middle
