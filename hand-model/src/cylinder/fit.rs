@@ -1,30 +1,7 @@
 //! A cylinder model fitted to a sphere-mesh template, so that the Ch. 2 tracker can run on (and
 //! be scored against) the synthetic sequences of a sphere-mesh subject.
 //!
-//! # What is kept, what is dropped
-//! - **Skeleton**: the template's bones are kept wholesale (names, tree, rest frames), so every
-//!   joint keypoint is the same bone origin in both models. DOFs that move no segment are dropped:
-//!   for the sphere-mesh templates these are the two wrist DOFs (`wrist_abd`, `wrist_flex`), whose
-//!   bone carries only the forearm spheres. The remaining DOFs keep their names, order, axes and
-//!   limits; for the 28-DOF templates they are exactly [`super::CYLINDER_DOF_NAMES`] (6 global +
-//!   20 articulations, thesis §2.2). The wrist DOFs move no keypoint either (the wrist keypoint is
-//!   the wrist bone's own rotation center), so a sphere-mesh pose mapped by DOF name
-//!   ([`CylinderModel::pose_by_name`]) gives the same 21 keypoints.
-//! - **Segments** (htrack's order: palm, then thumb, pinky, ring, middle, index, three each): a
-//!   phalanx segment runs along its bone's +y from the bone origin to the (rest) axial position
-//!   of the next sphere of the digit (`base → bottom → middle → top`, the honline sphere names),
-//!   circular, with the radii of those two spheres; the distal segment is extended when needed so
-//!   that its far cap reaches the tip keypoint (the thumb tip sphere `thumb_additional` lies
-//!   beyond `thumb_top`). The palm is one elliptical segment on the palm bone sized by the
-//!   spheres attached to that bone: thickness `max |z| + r`, cap reaching the farthest sphere
-//!   along +y, width at the start / end the largest `|x| + r` of the spheres in the proximal /
-//!   distal half.
-//! - **Keypoints**: joints are the same bones; a tip is the sphere-mesh tip (tip sphere center
-//!   plus its radius along the bone's +y), expressed in the distal bone's frame — a
-//!   [`CylinderKeypoint::Tip`] of the distal segment when it lies on that segment's axis cap (the
-//!   fingers), a [`CylinderKeypoint::Point`] otherwise (the default thumb tip sphere sits 1.5 mm
-//!   off the axis). Keypoints therefore coincide with the template's at every pose, up to
-//!   floating-point rounding.
+//! The rules are documented on [`CylinderModel::from_sphere_mesh`].
 
 use std::path::Path;
 
@@ -49,10 +26,36 @@ const TIP_TOLERANCE: f64 = 1e-9;
 const SOURCE: &str = "<cylinders fitted to a sphere mesh>";
 
 impl CylinderModel {
-    /// The cylinder model of a sphere-mesh template (see the [module documentation](self) for
-    /// the rules): same bones, the DOFs that move a segment (26 for the 28-DOF templates, same
-    /// names), one segment per palm/phalanx bone sized by the template's spheres, and keypoints
-    /// that coincide with [`crate::spheremesh::PosedSphereMesh::keypoints`] at any pose.
+    /// The cylinder model of a sphere-mesh template: same bones, the DOFs that move a segment
+    /// (26 for the 28-DOF templates, same names), one segment per palm/phalanx bone sized by the
+    /// template's spheres, and keypoints that coincide with
+    /// [`crate::spheremesh::PosedSphereMesh::keypoints`] at any pose.
+    ///
+    /// # Rules
+    /// - **Skeleton**: the template's bones are kept wholesale (names, tree, rest frames), so every
+    ///   joint keypoint is the same bone origin in both models. DOFs that move no segment are
+    ///   dropped: for the sphere-mesh templates these are the two wrist DOFs (`wrist_abd`,
+    ///   `wrist_flex`), whose bone carries only the forearm spheres. The remaining DOFs keep their
+    ///   names, order, axes and limits; for the 28-DOF templates they are exactly
+    ///   [`super::CYLINDER_DOF_NAMES`] (6 global + 20 articulations, thesis §2.2). The wrist DOFs
+    ///   move no keypoint either (the wrist keypoint is the wrist bone's own rotation center), so a
+    ///   sphere-mesh pose mapped by DOF name ([`CylinderModel::pose_by_name`]) gives the same 21
+    ///   keypoints.
+    /// - **Segments** (htrack's order: palm, then thumb, pinky, ring, middle, index, three each): a
+    ///   phalanx segment runs along its bone's +y from the bone origin to the (rest) axial position
+    ///   of the next sphere of the digit (`base → bottom → middle → top`, the honline sphere
+    ///   names), circular, with the radii of those two spheres; the distal segment is extended when
+    ///   needed so that its far cap reaches the tip keypoint (the thumb tip sphere
+    ///   `thumb_additional` lies beyond `thumb_top`). The palm is one elliptical segment on the
+    ///   palm bone sized by the spheres attached to that bone: thickness `max |z| + r`, cap
+    ///   reaching the farthest sphere along +y, width at the start / end the largest `|x| + r` of
+    ///   the spheres in the proximal / distal half.
+    /// - **Keypoints**: joints are the same bones; a tip is the sphere-mesh tip (tip sphere center
+    ///   plus its radius along the bone's +y), expressed in the distal bone's frame — a
+    ///   [`CylinderKeypoint::Tip`] of the distal segment when it lies on that segment's axis cap
+    ///   (the fingers), a [`CylinderKeypoint::Point`] otherwise (the default thumb tip sphere sits
+    ///   1.5 mm off the axis). Keypoints therefore coincide with the template's at every pose, up
+    ///   to floating-point rounding.
     ///
     /// Refused: templates without the bones `palm`, `<digit>_1..3` or the spheres
     /// `<digit>_base/bottom/middle/top`, a palm bone without spheres, or a tip keypoint whose

@@ -11,7 +11,7 @@ use crate::context::TrackingCtx;
 
 /// Settings of [`Collision`].
 ///
-/// The weight: the thesis fixes ω₆ = 1e8 for its Ch. 2 results (§2.5, with ω₃ = ω₇ = 1e8);
+/// The weight: the thesis fixes ω₆ = 1e8 for its Ch. 2 results (§2.4, with ω₃ = ω₇ = 1e8);
 /// htrack's code uses ω = 1e4 with `fraction = 0.1` (the right-hand side scaled by 0.1, an
 /// under-relaxation that asks each iteration to remove a tenth of the penetration; hmodel: 1e3
 /// and 0.01; ANCHOR-FACTS §5.2, §5.5). We keep htrack's ω = 1e4 (not squared, the convention of

@@ -9,7 +9,7 @@ use crate::context::TrackingCtx;
 /// Settings of [`Wrist`].
 ///
 /// The weight: htrack's code uses ω = 1e5 on a residual in pixels (ANCHOR-FACTS §5.2, §5.5),
-/// the thesis lists ω₃ = 1e8 for its Ch. 2 results (§2.5). We keep htrack's 1e5 (ω not
+/// the thesis lists ω₃ = 1e8 for its Ch. 2 results (§2.4). We keep htrack's 1e5 (ω not
 /// squared, like every prior term); 1e8 pins the wrist to the line as a hard constraint.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
@@ -108,7 +108,7 @@ impl EnergyTerm<TrackingCtx<'_>> for Wrist {
             });
         };
         let root = frame.transform_point(&local);
-        if !(root.z > MIN_DEPTH) {
+        if root.z.is_nan() || root.z <= MIN_DEPTH {
             return Ok(TermStats::ZERO);
         }
         let r = n.dot(&(camera.project(&root) - c_px));
