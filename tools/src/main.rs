@@ -3,6 +3,7 @@
 mod convert;
 mod demo;
 mod model;
+mod prior;
 mod progress;
 mod synth;
 
@@ -39,6 +40,12 @@ enum Command {
         after_help = "Example: hands synth --motion teaser --frames 600 --noise tof --seed 7 --out seq.mcap --preview sheet.png"
     )]
     Synth(synth::SynthArgs),
+    /// Build the project's PCA pose prior from its pose corpus.
+    #[command(
+        subcommand,
+        after_help = "Example: hands prior build --animbank animbank.pose --out pose-prior.json"
+    )]
+    Prior(prior::PriorCommand),
 }
 
 fn main() -> anyhow::Result<()> {
@@ -48,5 +55,6 @@ fn main() -> anyhow::Result<()> {
         Command::Model(cmd) => model::run(cmd),
         Command::Convert(args) => convert::run(args),
         Command::Synth(args) => synth::run(args),
+        Command::Prior(cmd) => prior::run(cmd),
     }
 }
