@@ -37,6 +37,25 @@ pub enum DatasetError {
         /// What is wrong.
         reason: String,
     },
+    /// A data file could not be parsed.
+    #[error("{}{}: {reason}", file.display(), line.map(|l| format!(", line {l}")).unwrap_or_default())]
+    Parse {
+        /// The file (or `<memory>`).
+        file: std::path::PathBuf,
+        /// The 1-based line, when the problem is on one line.
+        line: Option<usize>,
+        /// What is wrong.
+        reason: String,
+    },
+    /// A file could not be read or written.
+    #[error("{}: {source}", file.display())]
+    Io {
+        /// The file.
+        file: std::path::PathBuf,
+        /// The underlying error.
+        #[source]
+        source: std::io::Error,
+    },
     /// An error of the hand model (template, shape vector).
     #[error(transparent)]
     Model(#[from] ModelError),

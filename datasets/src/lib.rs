@@ -10,13 +10,17 @@
 //! - [`noise`]: depth-sensor models (noise-free, quantized, time of flight, structured light);
 //! - [`synth`]: synthetic depth + RGB frames (hand, forearm, blue wristband, wall) with exact
 //!   ground truth (pose, shape and the 21 keypoints of DESIGN.md);
-//! - [`sheet`]: contact sheets of depth frames with keypoints.
+//! - [`sheet`]: contact sheets of depth frames with keypoints;
+//! - [`animbank`]: the RealSense recorded-pose corpus, retargeted to our digit DOFs;
+//! - [`prior`]: the pose corpus and the project's own PCA pose prior (thesis §2.3.2).
 //!
 //! Still to come (issue 7): readers for the Handy/teaser layout, NYU and Dexter-1.
 
+pub mod animbank;
 pub mod error;
 pub mod motion;
 pub mod noise;
+pub mod prior;
 pub mod sheet;
 pub mod subjects;
 pub mod synth;

@@ -18,10 +18,7 @@ fn track(noise: &str, frames: usize) -> SyntheticRun {
     })
     .unwrap();
     let model = CylinderModel::from_sphere_mesh_with_wrist(seq.template()).unwrap();
-    let prior = hand_model::solver::PcaPrior::load_htrack_dir(std::path::Path::new(
-        "../../shared/reference/htrack-pose-space-pca",
-    ))
-    .unwrap();
+    let prior = hand_model::solver::PcaPrior::project_default();
     let mut tracker = Tracker::new(&model, TrackerConfig::default(), Some(&prior)).unwrap();
     let run = seq
         .run(|f, t| tracker.track(f, t.frame, t.timestamp), |_| {})

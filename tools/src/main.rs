@@ -3,6 +3,7 @@
 mod convert;
 mod demo;
 mod model;
+mod prior;
 mod progress;
 mod report;
 mod synth;
@@ -47,6 +48,12 @@ enum Command {
     /// Write a reproduction report (markdown + SVG plots) from synthetic ground truth.
     #[command(after_help = "Example: hands report ch2 --out docs/ch2 --frames 300")]
     Report(report::ReportArgs),
+    /// Build the project's PCA pose prior from its pose corpus.
+    #[command(
+        subcommand,
+        after_help = "Example: hands prior build --animbank animbank.pose --out pose-prior.json"
+    )]
+    Prior(prior::PriorCommand),
 }
 
 fn main() -> anyhow::Result<()> {
@@ -58,5 +65,6 @@ fn main() -> anyhow::Result<()> {
         Command::Synth(args) => synth::run(args),
         Command::Track(args) => track::run(args),
         Command::Report(args) => report::run(args),
+        Command::Prior(cmd) => prior::run(cmd),
     }
 }

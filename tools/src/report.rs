@@ -12,6 +12,7 @@ use eval::markers::{mean, under_curve, MarkerSummary};
 use eval::plot::{line_plot_svg, Series};
 use eval::synthetic::{SyntheticRun, SyntheticSequence, SyntheticSpec};
 use hand_model::cylinder::CylinderModel;
+use hand_model::solver::terms::PosePriorForm;
 use hand_model::solver::PcaPrior;
 use hand_model::spheremesh::SphereMeshTemplate;
 use htrack_icp::{Tracker, TrackerConfig};
@@ -84,6 +85,42 @@ fn experiments() -> Vec<Experiment> {
             ],
         },
         Experiment {
+            id: "silhouette",
+            figure: "Fig. 2.9",
+            claim: "the 2D silhouette term keeps occluded fingers where the data allows them",
+            motion: "occlusion",
+            noise: "tof",
+            metric: Metric::KeypointError,
+            variants: [
+                Variant {
+                    label: "with E2D",
+                    apply: |_| {},
+                },
+                Variant {
+                    label: "without E2D",
+                    apply: |c| c.enabled.e2d = false,
+                },
+            ],
+        },
+        Experiment {
+            id: "pca_projective",
+            figure: "Fig. 2.14",
+            claim: "the projective PCA prior tracks better than optimizing directly in the PCA subspace",
+            motion: "axis_articulation",
+            noise: "tof",
+            metric: Metric::KeypointError,
+            variants: [
+                Variant {
+                    label: "projective prior",
+                    apply: |_| {},
+                },
+                Variant {
+                    label: "PCA subspace",
+                    apply: |c| c.pose_prior.form = PosePriorForm::Subspace,
+                },
+            ],
+        },
+        Experiment {
             id: "rigid_first",
             figure: "Fig. 2.17",
             claim: "a rigid-only first iteration helps under fast global rotation",
@@ -129,7 +166,7 @@ fn tracking_model(template: &SphereMeshTemplate) -> Result<CylinderModel> {
 
 /// The project's PCA pose prior.
 fn default_prior() -> Option<PcaPrior> {
-    None
+    Some(PcaPrior::project_default())
 }
 
 /// Keypoint acceleration error per frame (mm/frame²), averaged over keypoints.

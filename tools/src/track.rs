@@ -35,9 +35,10 @@ pub struct TrackArgs {
     /// Tracker settings as JSON (any subset of the fields; the flags below override it).
     #[arg(long)]
     pub config: Option<PathBuf>,
-    /// PCA pose prior: `htrack:<dir>` for the original htrack files, or none to run without.
-    #[arg(long)]
-    pub prior: Option<String>,
+    /// PCA pose prior: `project` (the project's own, embedded), a prior `.json` (`hands prior
+    /// build`), `htrack:<dir>` (the original htrack files) or `none`.
+    #[arg(long, default_value = "project")]
+    pub prior: String,
     /// Segmentation: wristband, depth, presegmented.
     #[arg(long, default_value = "wristband")]
     pub segmentation: String,
@@ -99,13 +100,17 @@ fn load_model(name: &str) -> Result<CylinderModel> {
 }
 
 /// Load the prior named by `--prior`.
-fn load_prior(spec: Option<&str>) -> Result<Option<PcaPrior>> {
+fn load_prior(spec: &str) -> Result<Option<PcaPrior>> {
     match spec {
-        None | Some("none") => Ok(None),
-        Some(s) if s.starts_with("htrack:") => Ok(Some(PcaPrior::load_htrack_dir(Path::new(
+        "none" => Ok(None),
+        "project" => Ok(Some(PcaPrior::project_default())),
+        s if s.starts_with("htrack:") => Ok(Some(PcaPrior::load_htrack_dir(Path::new(
             &s["htrack:".len()..],
         ))?)),
-        Some(other) => bail!("unknown --prior `{other}`: use htrack:<dir> or none"),
+        s if s.ends_with(".json") => Ok(Some(PcaPrior::load_json(Path::new(s))?)),
+        other => {
+            bail!("unknown --prior `{other}`: use project, a .json file, htrack:<dir> or none")
+        }
     }
 }
 
@@ -172,7 +177,7 @@ pub fn run(args: TrackArgs) -> Result<()> {
         bail!("--out must end in .jsonl, got {}", args.out.display());
     }
     let model = load_model(&args.model)?;
-    let prior = load_prior(args.prior.as_deref())?;
+    let prior = load_prior(&args.prior)?;
     let config = tracker_config(&args)?;
     let mut reader = open_sequence(&args.sequence)
         .with_context(|| format!("opening {}", args.sequence.display()))?;

@@ -79,8 +79,9 @@ pub use lm::{
 };
 pub use normal_equations::{NormalEquations, TermStats};
 pub use pca::{
-    parse_htrack_matrix, parse_htrack_vector, read_htrack_matrix, read_htrack_vector, PcaGroup,
-    PcaPrior, HMODEL_LATENT_DIMS, HTRACK_LATENT_DIMS,
+    htrack_groups, parse_htrack_matrix, parse_htrack_vector, read_htrack_matrix,
+    read_htrack_vector, PcaGroup, PcaPrior, HMODEL_LATENT_DIMS, HTRACK_LATENT_DIMS,
+    PCA_PRIOR_FORMAT, PCA_PRIOR_VERSION, PCA_VARIANCE_FLOOR,
 };
 pub use points::{cylinder_points, skeleton_points, sphere_mesh_points, KinematicPoint};
 pub use term::{EnergyTerm, PoseContext, SkeletonCtx, TermError};

@@ -29,14 +29,66 @@
 //!
 //! The priors were learned on the originals' skeletons, whose rest frames differ from ours; a
 //! prior transfers as "the same joint angles are likely", not as identical geometry.
+//!
+//! # The project's own prior
+//! [`PcaPrior::fit`] learns a prior from pose samples (mean, eigen-decomposition of the sample
+//! covariance, components sorted by decreasing variance). The project's prior,
+//! [`PcaPrior::project_default`], is fitted by the project's own code on its pose corpus (the
+//! authored key poses and motions of `datasets::motion`, plus the recorded RealSense poses
+//! retargeted to our skeleton, see `datasets::animbank`) with htrack's grouping (thumb 4 DOFs,
+//! fingers 16 DOFs, [`htrack_groups`]); all components are kept so users can truncate (htrack
+//! uses 3 + 3, [`HTRACK_LATENT_DIMS`]). It is the committed file `hand-model/data/pose-prior.json`,
+//! regenerated from the repository root by
+//!
+//! ```text
+//! cargo run --release -p tools -- prior build \
+//!     --animbank ../shared/reference/pose-corpus-realsense/animbank.pose \
+//!     --out hand-model/data/pose-prior.json
+//! ```
+//!
+//! (the test `committed_prior_is_reproducible` of `datasets` checks that this reproduces the
+//! committed file within 1e-9 when the corpus is present).
+//!
+//! # JSON file format ([`PCA_PRIOR_FORMAT`], version [`PCA_PRIOR_VERSION`])
+//! ```json
+//! { "format": "hands-pca-prior", "version": 1,
+//!   "description": "free text: corpus, sample count, command",
+//!   "groups": [ { "name": "thumb",
+//!                 "dofs": ["thumb_cmc_abd", "thumb_cmc_flex", "thumb_mcp_flex", "thumb_ip_flex"],
+//!                 "mean": [4 values, rad],
+//!                 "variances": [m values, rad², decreasing],
+//!                 "components": [m principal directions, each 4 values, unit length] },
+//!               { "name": "fingers", "dofs": [16 names], ... } ] }
+//! ```
+//! Our conventions (positive flexion toward the palm); unknown fields are refused; the loader
+//! checks shapes, finiteness, positive variances and unique DOF names ([`PcaPrior::validate`]).
 
 use std::path::Path;
 
-use nalgebra::{DMatrix, DVector};
+use nalgebra::{DMatrix, DVector, SymmetricEigen};
+use serde::{Deserialize, Serialize};
 
 use crate::cylinder::HTRACK_THETA_LAYOUT;
 use crate::error::{ModelError, Result};
+use crate::kinematics::names::DIGIT_DOFS;
 use crate::spheremesh::HONLINE_THETA_DOFS;
+
+/// The `format` tag of a JSON prior file.
+pub const PCA_PRIOR_FORMAT: &str = "hands-pca-prior";
+/// The version of the JSON prior format this crate writes and reads.
+pub const PCA_PRIOR_VERSION: u32 = 1;
+/// Smallest variance [`PcaPrior::fit`] stores (rad²): directions the corpus never moves along
+/// (rank-deficient samples) get this floor so the prior stays invertible.
+pub const PCA_VARIANCE_FLOOR: f64 = 1e-8;
+
+/// The committed project prior (see the module docs for the command that regenerates it).
+const PROJECT_PRIOR_JSON: &str = include_str!("../../data/pose-prior.json");
+
+/// htrack's grouping in our DOF names: `thumb` = the 4 thumb DOFs, `fingers` = the 16 finger
+/// DOFs ([`DIGIT_DOFS`] order).
+pub fn htrack_groups() -> [(&'static str, &'static [&'static str]); 2] {
+    [("thumb", &DIGIT_DOFS[..4]), ("fingers", &DIGIT_DOFS[4..])]
+}
 
 /// Latent dimensions htrack uses per group (`latent_size` 3 for thumb and fingers).
 pub const HTRACK_LATENT_DIMS: usize = 3;
@@ -75,6 +127,13 @@ impl PcaGroup {
         let m = m.min(self.num_latent());
         self.basis = self.basis.columns(0, m).into_owned();
         self.variances.truncate(m);
+    }
+
+    /// Fraction of the total variance carried by the first `m` components (1 when `m` ≥ the
+    /// number kept; meaningful as "variance explained" when all k components are kept).
+    pub fn explained_variance(&self, m: usize) -> f64 {
+        let total: f64 = self.variances.iter().sum();
+        self.variances.iter().take(m).sum::<f64>() / total
     }
 
     /// `max |PᵀP − I|`: how far the basis is from orthonormal.
@@ -173,6 +232,244 @@ impl PcaPrior {
         Ok(prior)
     }
 
+    /// Fit a prior to pose samples: per group, the mean and the eigen-decomposition of the
+    /// sample covariance (divisor n − 1), **all** k components kept, sorted by decreasing
+    /// variance; each direction's largest-magnitude entry is made positive (a deterministic
+    /// sign); variances below [`PCA_VARIANCE_FLOOR`] are raised to it.
+    ///
+    /// `groups` = (name, DOF names) pairs, e.g. [`htrack_groups`]; every sample holds one value
+    /// per entry of `dof_names` (rad). Refused: fewer than 2 samples, a sample of the wrong
+    /// length or with a non-finite value, a group DOF missing from `dof_names`, repeated DOFs.
+    ///
+    /// ```
+    /// use hand_model::solver::{htrack_groups, PcaPrior};
+    /// use hand_model::kinematics::names::DIGIT_DOFS;
+    /// let samples: Vec<Vec<f64>> = (0..50)
+    ///     .map(|i| (0..20).map(|d| ((i * 7 + d * 3) % 11) as f64 * 0.1).collect())
+    ///     .collect();
+    /// let prior = PcaPrior::fit(&htrack_groups(), &DIGIT_DOFS, &samples).unwrap();
+    /// assert_eq!(prior.groups[1].num_latent(), 16);
+    /// assert!(prior.groups[1].variances[0] >= prior.groups[1].variances[1]);
+    /// ```
+    pub fn fit(
+        groups: &[(&str, &[&str])],
+        dof_names: &[&str],
+        samples: &[Vec<f64>],
+    ) -> Result<Self> {
+        let bad = |reason: String| ModelError::InvalidArgument {
+            name: "samples",
+            reason,
+        };
+        if samples.len() < 2 {
+            return Err(bad(format!("{} samples, need at least 2", samples.len())));
+        }
+        for (i, s) in samples.iter().enumerate() {
+            if s.len() != dof_names.len() {
+                return Err(bad(format!(
+                    "sample {i} has {} values for {} DOF names",
+                    s.len(),
+                    dof_names.len()
+                )));
+            }
+            if let Some(j) = s.iter().position(|v| !v.is_finite()) {
+                return Err(bad(format!("sample {i}, value {j} is not finite")));
+            }
+        }
+        let n = samples.len() as f64;
+        let mut out = Vec::with_capacity(groups.len());
+        for &(name, dofs) in groups {
+            let idx: Vec<usize> = dofs
+                .iter()
+                .map(|d| {
+                    dof_names.iter().position(|n| n == d).ok_or_else(|| {
+                        bad(format!(
+                            "group `{name}`: DOF `{d}` is not among the sample names"
+                        ))
+                    })
+                })
+                .collect::<Result<_>>()?;
+            let k = idx.len();
+            let mut mean = vec![0.0; k];
+            for s in samples {
+                for (m, &i) in mean.iter_mut().zip(&idx) {
+                    *m += s[i];
+                }
+            }
+            mean.iter_mut().for_each(|m| *m /= n);
+            let mut cov = DMatrix::<f64>::zeros(k, k);
+            let mut y = vec![0.0; k];
+            for s in samples {
+                for (a, &i) in idx.iter().enumerate() {
+                    y[a] = s[i] - mean[a];
+                }
+                for a in 0..k {
+                    for b in a..k {
+                        cov[(a, b)] += y[a] * y[b];
+                    }
+                }
+            }
+            for a in 0..k {
+                for b in a..k {
+                    let v = cov[(a, b)] / (n - 1.0);
+                    cov[(a, b)] = v;
+                    cov[(b, a)] = v;
+                }
+            }
+            let eig = SymmetricEigen::new(cov);
+            let mut order: Vec<usize> = (0..k).collect();
+            order.sort_by(|&a, &b| eig.eigenvalues[b].total_cmp(&eig.eigenvalues[a]));
+            let mut basis = DMatrix::<f64>::zeros(k, k);
+            let mut variances = Vec::with_capacity(k);
+            for (c, &e) in order.iter().enumerate() {
+                let mut v = eig.eigenvectors.column(e).normalize();
+                let big = v.iamax();
+                if v[big] < 0.0 {
+                    v.neg_mut();
+                }
+                basis.set_column(c, &v);
+                variances.push(eig.eigenvalues[e].max(PCA_VARIANCE_FLOOR));
+            }
+            out.push(PcaGroup {
+                name: name.to_string(),
+                dofs: dofs.iter().map(|d| d.to_string()).collect(),
+                mean,
+                basis,
+                variances,
+            });
+        }
+        let prior = Self { groups: out };
+        prior.validate(Path::new("<fit>"))?;
+        Ok(prior)
+    }
+
+    /// The project's own prior, fitted by the project's code on its pose corpus (module docs),
+    /// all components kept (truncate with [`PcaPrior::truncated`], e.g. to
+    /// [`HTRACK_LATENT_DIMS`]). Embedded from `hand-model/data/pose-prior.json`.
+    pub fn project_default() -> Self {
+        static PRIOR: std::sync::OnceLock<PcaPrior> = std::sync::OnceLock::new();
+        PRIOR
+            .get_or_init(|| {
+                Self::from_json(
+                    PROJECT_PRIOR_JSON,
+                    Path::new("hand-model/data/pose-prior.json"),
+                )
+                .expect("the embedded project prior is valid")
+            })
+            .clone()
+    }
+
+    /// Serialize to the JSON format of the module docs (`description`: free text).
+    pub fn to_json(&self, description: &str) -> String {
+        let file = PriorFile {
+            format: PCA_PRIOR_FORMAT.into(),
+            version: PCA_PRIOR_VERSION,
+            description: description.into(),
+            groups: self
+                .groups
+                .iter()
+                .map(|g| GroupFile {
+                    name: g.name.clone(),
+                    dofs: g.dofs.clone(),
+                    mean: g.mean.clone(),
+                    variances: g.variances.clone(),
+                    components: g
+                        .basis
+                        .column_iter()
+                        .map(|c| c.iter().copied().collect())
+                        .collect(),
+                })
+                .collect(),
+        };
+        let mut text = serde_json::to_string_pretty(&file).expect("a prior serializes");
+        text.push('\n');
+        text
+    }
+
+    /// Parse the JSON format of the module docs; `source` names the data in errors.
+    pub fn from_json(text: &str, source: &Path) -> Result<Self> {
+        let file: PriorFile = serde_json::from_str(text).map_err(|e| ModelError::Parse {
+            file: source.to_path_buf(),
+            reason: format!("not a {PCA_PRIOR_FORMAT} JSON file: {e}"),
+        })?;
+        if file.format != PCA_PRIOR_FORMAT {
+            return Err(ModelError::field(
+                source,
+                "format",
+                None,
+                format!("`{}`, expected `{PCA_PRIOR_FORMAT}`", file.format),
+            ));
+        }
+        if file.version != PCA_PRIOR_VERSION {
+            return Err(ModelError::field(
+                source,
+                "version",
+                None,
+                format!(
+                    "{}, this build reads version {PCA_PRIOR_VERSION}",
+                    file.version
+                ),
+            ));
+        }
+        if file.groups.is_empty() {
+            return Err(ModelError::field(source, "groups", None, "no groups"));
+        }
+        let mut groups = Vec::with_capacity(file.groups.len());
+        for (gi, g) in file.groups.into_iter().enumerate() {
+            let k = g.dofs.len();
+            if let Some(c) = g.components.iter().position(|c| c.len() != k) {
+                return Err(ModelError::field(
+                    source,
+                    "groups.components",
+                    Some(gi),
+                    format!(
+                        "component {c} has {} entries for {k} DOFs",
+                        g.components[c].len()
+                    ),
+                ));
+            }
+            let m = g.components.len();
+            let basis = DMatrix::from_iterator(k, m, g.components.into_iter().flatten());
+            groups.push(PcaGroup {
+                name: g.name,
+                dofs: g.dofs,
+                mean: g.mean,
+                basis,
+                variances: g.variances,
+            });
+        }
+        let prior = Self { groups };
+        prior.validate(source)?;
+        for (gi, g) in prior.groups.iter().enumerate() {
+            if g.orthonormality_error() > 1e-6 {
+                return Err(ModelError::field(
+                    source,
+                    "groups.components",
+                    Some(gi),
+                    format!(
+                        "group `{}`: components are not orthonormal (max |PᵀP − I| = {:.2e})",
+                        g.name,
+                        g.orthonormality_error()
+                    ),
+                ));
+            }
+        }
+        Ok(prior)
+    }
+
+    /// Write the JSON file atomically (a temporary file in the same folder, then a rename).
+    pub fn save_json(&self, path: &Path, description: &str) -> Result<()> {
+        crate::spheremesh::write_atomic(path, self.to_json(description).as_bytes())
+    }
+
+    /// Read a JSON prior file ([`PcaPrior::from_json`]).
+    pub fn load_json(path: &Path) -> Result<Self> {
+        let text = std::fs::read_to_string(path).map_err(|source| ModelError::Io {
+            file: path.to_path_buf(),
+            source,
+        })?;
+        Self::from_json(&text, path)
+    }
+
     /// Keep at most `m` latent dimensions per group.
     pub fn truncated(&self, m: usize) -> Self {
         let mut out = self.clone();
@@ -220,6 +517,28 @@ impl PcaPrior {
         }
         Ok(())
     }
+}
+
+/// On-disk form of a [`PcaPrior`] (module docs).
+#[derive(Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct PriorFile {
+    format: String,
+    version: u32,
+    #[serde(default)]
+    description: String,
+    groups: Vec<GroupFile>,
+}
+
+#[derive(Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct GroupFile {
+    name: String,
+    dofs: Vec<String>,
+    mean: Vec<f64>,
+    variances: Vec<f64>,
+    /// The m principal directions, each with one entry per DOF.
+    components: Vec<Vec<f64>>,
 }
 
 fn read_bytes(path: &Path) -> Result<Vec<u8>> {

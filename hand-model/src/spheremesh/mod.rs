@@ -4,6 +4,7 @@
 mod default;
 mod import_hmodel;
 mod json;
+pub(crate) use json::write_atomic;
 mod posed;
 mod shape_params;
 mod template;

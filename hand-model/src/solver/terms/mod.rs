@@ -18,5 +18,5 @@ mod temporal;
 pub use damping::{Damping, DampingParams};
 pub use joint_limits::{JointLimits, JointLimitsParams};
 pub use point_targets::{PointTargets, PointTargetsParams};
-pub use pose_prior::{PosePrior, PosePriorForm, PosePriorParams};
+pub use pose_prior::{PosePrior, PosePriorForm, PosePriorParams, SUBSPACE_STIFFNESS};
 pub use temporal::{Temporal, TemporalParams};

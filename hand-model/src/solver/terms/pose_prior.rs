@@ -26,7 +26,19 @@ pub enum PosePriorForm {
     /// solve, linearized at θ̃* every iteration (their solved step is discarded). Needs
     /// [`PosePrior::num_aux`] auxiliary unknowns in the solver.
     Augmented,
+    /// Optimization **in the PCA subspace** (the alternative of thesis Fig. 2.14): each group's
+    /// DOFs are held to `θ_g = μ + P θ̃` and only the latents move, with the Mahalanobis prior
+    /// `ω₅ ‖Σ θ̃‖²` on them. Realized by the penalty method rather than a reparametrization
+    /// of the solver unknowns (the cheapest faithful way: no change to the solver, the term
+    /// stays one constant quadratic): `E = ω⊥ ‖(I − P L) y‖² + ω₅ ‖Σ L y‖²` with the least-
+    /// squares latents `θ̃ = L y`, `L = (PᵀP)⁻¹Pᵀ`, and the stiffness
+    /// `ω⊥ = ω₄ · SUBSPACE_STIFFNESS` (10⁶ ω₄): with ω₄ = 10³ a pose leaves the subspace by
+    /// `‖(I − PL) y‖ ~ 10⁻⁴·‖data gradient‖`, i.e. the reparametrized solve to that tolerance.
+    Subspace,
 }
+
+/// `ω⊥ / ω₄` of [`PosePriorForm::Subspace`].
+pub const SUBSPACE_STIFFNESS: f64 = 1e6;
 
 /// Weights and form of [`PosePrior`].
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -155,13 +167,22 @@ impl PosePrior {
                 m,
                 g.variances.iter().map(|v| 1.0 / v),
             ));
-            let gram = p.transpose() * p * w4 + sigma2 * w5;
+            let gram = p.transpose() * p * w4 + &sigma2 * w5;
             let chol = Cholesky::new(gram.clone())
                 .ok_or_else(|| bad(format!("group `{}`: ω₄PᵀP + ω₅Σ² is singular", g.name)))?;
-            let latent_map = chol.solve(&p.transpose()) * w4;
+            let mut latent_map = chol.solve(&p.transpose()) * w4;
             let eye = DMatrix::<f64>::identity(k, k);
             let r = &eye - p * &latent_map;
             let hessian = match params.form {
+                PosePriorForm::Subspace => {
+                    let ptp = Cholesky::new(p.transpose() * p)
+                        .ok_or_else(|| bad(format!("group `{}`: PᵀP is singular", g.name)))?;
+                    latent_map = ptp.solve(&p.transpose());
+                    let r = &eye - p * &latent_map;
+                    let h = r.transpose() * &r * (w4 * SUBSPACE_STIFFNESS)
+                        + latent_map.transpose() * &sigma2 * &latent_map * w5;
+                    (&h + h.transpose()) * 0.5
+                }
                 PosePriorForm::Exact => {
                     let h = &r * w4;
                     (&h + h.transpose()) * 0.5
@@ -208,7 +229,8 @@ impl PosePrior {
         self.groups.len()
     }
 
-    /// The optimal latent coordinates `θ̃* = K (θ_g − μ)` of group `group` (e.g. honline's
+    /// The optimal latent coordinates `θ̃* = K (θ_g − μ)` of group `group` (the least-squares
+    /// `L (θ_g − μ)` for [`PosePriorForm::Subspace`]; e.g. honline's
     /// "fingers bending" latent is `latent(θ, 1)[0]`); `None` when out of range.
     pub fn latent(&self, theta: &[f64], group: usize) -> Option<Vec<f64>> {
         let g = self.groups.get(group)?;
