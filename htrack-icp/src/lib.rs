@@ -14,10 +14,12 @@
 //!   silhouette is pushed toward its nearest silhouette pixel, two pixel rows with the
 //!   projection Jacobian of §2.7.2; the rendering is
 //!   [`hand_model::cylinder::CylinderRaster`] (exact ray casting of the segments);
+//! - [`Tracker`]: the per-frame loop of §2.4 — warm start from the previous frame, 1 rigid + 7
+//!   full LM iterations over the enabled terms ([`TrackerConfig`], [`EnabledTerms`]), temporal
+//!   history, loss detection and multi-hypothesis re-initialization ([`LossParams`]), one
+//!   DESIGN.md record per frame (`hands track`);
 //! - [`synthetic`]: ray-marched point clouds of the posed model for tests.
 //!
-//! Not built yet (issue 4): the wrist term (Eq. 2.4), collisions (Eq. 2.7), the tracking loop
-//! and `hands track`.
 //! The priors (joint limits, damping, temporal, PCA pose prior) are the shared terms of
 //! [`hand_model::solver::terms`], which run on [`TrackingCtx`] through
 //! [`hand_model::solver::PoseContext`].
@@ -26,7 +28,25 @@
 //! penetration of non-adjacent finger segments, exact Jacobian, global columns zero) and
 //! [`terms::Wrist`] (E_wrist, Eq. 2.4: the projected wrist keypoint on the image line of the
 //! wristband axis). [`hand_model::cylinder::CylinderModel::from_sphere_mesh`] gives the cylinder
-//! model of a sphere-mesh subject, whose keypoints coincide with the synthetic ground truth.
+//! model of a sphere-mesh subject, whose keypoints coincide with the synthetic ground truth
+//! ([`hand_model::cylinder::CylinderModel::from_sphere_mesh_with_wrist`] adds a wrist segment,
+//! what the tracker uses on synthetic sequences).
+//!
+//! # Example
+//! ```
+//! use hand_model::cylinder::default_right_hand_cylinders;
+//! use hand_model::solver::PcaPrior;
+//! use htrack_icp::{Tracker, TrackerConfig};
+//! use sensor_io::preprocess::PreprocessedFrame;
+//!
+//! let model = default_right_hand_cylinders();
+//! let prior = PcaPrior::project_default();
+//! let mut tracker = Tracker::new(&model, TrackerConfig::default(), Some(&prior)).unwrap();
+//! // A frame without a hand keeps a valid pose and is flagged.
+//! let record = tracker.track(&PreprocessedFrame::default(), 0, 0.0);
+//! assert_eq!(record.flags, ["no_hand"]);
+//! assert!(record.is_finite() && record.keypoints.len() == 21);
+//! ```
 
 mod context;
 pub mod synthetic;

@@ -183,3 +183,111 @@ fn bad_inputs_fail_clearly() {
         assert!(!text.contains("panicked"), "{args:?} panicked: {text}");
     }
 }
+
+#[test]
+fn track_writes_one_record_per_frame_scored_against_truth() {
+    let d = tmp("track");
+    let seq = d.join("seq.mcap");
+    let out = d.join("track.jsonl");
+    let s = |p: &PathBuf| p.to_str().expect("utf8").to_string();
+    let (ok, text) = hands(&[
+        "synth",
+        "--motion",
+        "teaser",
+        "--frames",
+        "12",
+        "--out",
+        &s(&seq),
+    ]);
+    assert!(ok, "{text}");
+    let (ok, text) = hands(&[
+        "track",
+        &s(&seq),
+        "--model",
+        "subject:default",
+        "--out",
+        &s(&out),
+    ]);
+    assert!(ok, "{text}");
+    assert!(text.contains("ground truth: mean keypoint error"), "{text}");
+    let lines: Vec<serde_json::Value> = std::fs::read_to_string(&out)
+        .expect("track.jsonl")
+        .lines()
+        .map(|l| serde_json::from_str(l).expect("json line"))
+        .collect();
+    assert_eq!(lines.len(), 12);
+    for (i, l) in lines.iter().enumerate() {
+        assert_eq!(l["frame"], i as u64);
+        assert_eq!(l["keypoints"].as_array().expect("keypoints").len(), 21);
+        assert!(l["pose"]["index_mcp_flex"].is_number());
+        assert!(l["energies"]["e3d"].as_f64().expect("e3d") > 0.0);
+        assert!(l["timing_us"]["track"].as_f64().expect("timing") > 0.0);
+    }
+    assert_eq!(lines[0]["flags"][0], "reinitialized");
+    // Switches are honored: without E2D there is no e2d energy.
+    let (ok, text) = hands(&[
+        "track",
+        &s(&seq),
+        "--no-e2d",
+        "--no-pose-prior",
+        "--frames",
+        "3",
+        "--out",
+        &s(&out),
+    ]);
+    assert!(ok, "{text}");
+    let first = std::fs::read_to_string(&out).expect("track.jsonl");
+    assert_eq!(first.lines().count(), 3);
+    assert!(
+        !first.contains("\"e2d\"") && !first.contains("pose_prior"),
+        "{first}"
+    );
+}
+
+#[test]
+fn track_rejects_bad_arguments_clearly() {
+    let d = tmp("track-bad");
+    let s = |p: &PathBuf| p.to_str().expect("utf8").to_string();
+    let out = d.join("t.jsonl");
+    let (ok, text) = hands(&["track", &s(&d.join("missing.mcap")), "--out", &s(&out)]);
+    assert!(!ok && text.contains("missing.mcap"), "{text}");
+    let (ok, text) = hands(&["track", &s(&d), "--out", &s(&d.join("t.txt"))]);
+    assert!(!ok && text.contains(".jsonl"), "{text}");
+    let (ok, text) = hands(&["track", &s(&d), "--model", "spheres", "--out", &s(&out)]);
+    assert!(!ok && text.contains("--model"), "{text}");
+    let (ok, text) = hands(&["track", &s(&d), "--prior", "bogus", "--out", &s(&out)]);
+    assert!(!ok && text.contains("--prior"), "{text}");
+    let corrupt = d.join("corrupt.mcap");
+    std::fs::write(&corrupt, b"\x89MCAP0\r\ngarbage").expect("write");
+    let (ok, text) = hands(&["track", &s(&corrupt), "--out", &s(&out)]);
+    assert!(!ok && text.contains("corrupt.mcap"), "{text}");
+    assert!(!out.exists(), "no output on failure");
+}
+
+#[test]
+fn report_ch2_runs_on_a_few_frames() {
+    let d = tmp("report");
+    let (ok, text) = hands(&[
+        "report",
+        "ch2",
+        "--frames",
+        "4",
+        "--out",
+        d.to_str().expect("utf8"),
+    ]);
+    assert!(ok, "{text}");
+    let md = std::fs::read_to_string(d.join("README.md")).expect("README.md");
+    for id in [
+        "front_facing",
+        "silhouette",
+        "pca_projective",
+        "rigid_first",
+        "temporal",
+    ] {
+        assert!(md.contains(&format!("## {id}")), "{id} missing");
+        assert!(d.join(format!("{id}-error.svg")).exists());
+    }
+    assert!(md.contains("Reproduces") || md.contains("Does not reproduce"));
+    let (ok, text) = hands(&["report", "ch9", "--out", d.to_str().expect("utf8")]);
+    assert!(!ok && text.contains("ch9"), "{text}");
+}
