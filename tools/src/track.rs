@@ -24,9 +24,10 @@ use sensor_io::record::HandRecord;
 pub struct TrackArgs {
     /// Input sequence: a folder or an `.mcap` file (see `hands synth`, `hands convert`).
     pub sequence: PathBuf,
-    /// Tracking model (the Ch. 2 cylinder tracker): `cylinders` (the default cylinder model), an
-    /// htrack `.calib` file, a sphere-mesh template `.json` or `subject:<name>` (a `hands synth`
-    /// subject) — the last two give the cylinder model fitted to that sphere-mesh.
+    /// Tracking model (the Ch. 2 cylinder tracker): `cylinders` (cylinders fitted to the default
+    /// sphere-mesh hand, with a wrist segment), `cylinders-htrack` (htrack's proportions, no
+    /// wrist), an htrack `.calib` file, a sphere-mesh template `.json` or `subject:<name>` (a
+    /// `hands synth` subject) — the last two give the cylinders fitted to that sphere-mesh.
     #[arg(long, default_value = "cylinders")]
     pub model: String,
     /// Output: `.jsonl` (one JSON object per frame, DESIGN.md "Tracker output").
@@ -80,7 +81,10 @@ pub struct TrackArgs {
 /// Load the tracking model named by `--model`.
 fn load_model(name: &str) -> Result<CylinderModel> {
     match name {
-        "cylinders" | "default-cylinders" => Ok(default_right_hand_cylinders()),
+        "cylinders" => Ok(CylinderModel::from_sphere_mesh_with_wrist(
+            &hand_model::spheremesh::default_right_hand(),
+        )?),
+        "cylinders-htrack" => Ok(default_right_hand_cylinders()),
         p if p.ends_with(".calib") => Ok(hand_model::cylinder::load_htrack_calib(Path::new(p))?),
         p if p.ends_with(".json") => {
             let t = hand_model::spheremesh::SphereMeshTemplate::load(Path::new(p))?;
@@ -93,7 +97,7 @@ fn load_model(name: &str) -> Result<CylinderModel> {
             Ok(CylinderModel::from_sphere_mesh_with_wrist(&basis.apply(&base, &subject.beta)?)?)
         }
         other => bail!(
-            "unknown --model `{other}`: use `cylinders`, an htrack .calib file, a sphere-mesh .json or subject:<name> (the sphere-mesh \
+            "unknown --model `{other}`: use `cylinders`, `cylinders-htrack`, an htrack .calib file, a sphere-mesh .json or subject:<name> (the sphere-mesh \
              tracker is issue 5)"
         ),
     }
