@@ -40,8 +40,9 @@ pub struct TrackArgs {
     /// build`), `htrack:<dir>` (the original htrack files) or `none`.
     #[arg(long, default_value = "project")]
     pub prior: String,
-    /// Segmentation: wristband, depth, presegmented.
-    #[arg(long, default_value = "wristband")]
+    /// Segmentation: `auto` (the wristband where the frame has color and a band is found, else
+    /// depth only), `wristband`, `depth`, `presegmented`.
+    #[arg(long, default_value = "auto")]
     pub segmentation: String,
     /// Number of sensor points per frame (0 = every silhouette pixel).
     #[arg(long, default_value_t = 2500)]
@@ -145,10 +146,10 @@ fn tracker_config(args: &TrackArgs) -> Result<TrackerConfig> {
 
 fn segmentation(name: &str) -> Result<Segmentation> {
     Ok(match name {
-        "wristband" => Segmentation::Wristband(WristbandParams::default()),
+        "wristband" | "auto" => Segmentation::Wristband(WristbandParams::default()),
         "depth" => Segmentation::DepthOnly(DepthOnlyParams::default()),
         "presegmented" => Segmentation::Presegmented,
-        other => bail!("unknown --segmentation `{other}`: wristband, depth or presegmented"),
+        other => bail!("unknown --segmentation `{other}`: auto, wristband, depth or presegmented"),
     })
 }
 
@@ -191,6 +192,14 @@ pub fn run(args: TrackArgs) -> Result<()> {
         num_points: args.points,
         ..Default::default()
     });
+    // `auto`: depth-only segmentation for the frames where the wristband finds no hand.
+    let mut fallback = (args.segmentation == "auto").then(|| {
+        Preprocessor::new(PreprocessConfig {
+            segmentation: Segmentation::DepthOnly(DepthOnlyParams::default()),
+            num_points: args.points,
+            ..Default::default()
+        })
+    });
     let mut tracker = Tracker::new(&model, config, prior.as_ref())?;
     let total = match (reader.len(), args.frames) {
         (Some(n), Some(m)) => Some(n.min(m)),
@@ -211,6 +220,10 @@ pub fn run(args: TrackArgs) -> Result<()> {
         let t0 = Instant::now();
         pre.process(&frame, &camera, &mut frame_pre)
             .with_context(|| format!("preprocessing frame {frames}"))?;
+        if let Some(fb) = fallback.as_mut().filter(|_| frame_pre.hand.count == 0) {
+            fb.process(&frame, &camera, &mut frame_pre)
+                .with_context(|| format!("preprocessing frame {frames}"))?;
+        }
         let pre_us = t0.elapsed().as_secs_f64() * 1e6;
         let index = truth.as_ref().map_or(frames as u64, |t| t.frame);
         let timestamp = truth.as_ref().map_or(0.0, |t| t.timestamp);

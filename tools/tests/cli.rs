@@ -32,7 +32,10 @@ fn demo_runs_on_the_embedded_default() {
     let d = tmp("demo");
     let (ok, text) = hands(&["demo", "--frames", "6", "--out", d.to_str().expect("utf8")]);
     assert!(ok, "{text}");
-    assert!(text.contains("IoU") && text.contains("keypoint error"), "{text}");
+    assert!(
+        text.contains("IoU") && text.contains("keypoint error"),
+        "{text}"
+    );
     assert!(
         d.join("teaser.mcap").exists()
             && d.join("template.png").exists()
