@@ -231,7 +231,9 @@ impl Retargeter {
                 .map(|&d| skeleton.dofs()[d].name.as_str())
                 .collect();
             if dofs != [flex, abd] {
-                return Err(bad(format!("`{bone}` carries {dofs:?}, expected [{flex}, {abd}]")));
+                return Err(bad(format!(
+                    "`{bone}` carries {dofs:?}, expected [{flex}, {abd}]"
+                )));
             }
             let fa = skeleton.dofs()[bn.dofs[0]].axis;
             let aa = skeleton.dofs()[bn.dofs[1]].axis;
@@ -356,8 +358,13 @@ mod tests {
                 assert!(r.is_err(), "cut at {cut} accepted");
             }
         }
-        let short = parse_animbank(&line(&v[..118]), src).unwrap_err().to_string();
-        assert!(short.contains("line 1") && short.contains("118 numbers"), "{short}");
+        let short = parse_animbank(&line(&v[..118]), src)
+            .unwrap_err()
+            .to_string();
+        assert!(
+            short.contains("line 1") && short.contains("118 numbers"),
+            "{short}"
+        );
         let long = format!("{} 1", line(&v));
         assert!(parse_animbank(&long, src).is_err());
         let mut nan = v.clone();
@@ -388,7 +395,11 @@ mod tests {
         assert!((a[16] - 0.15).abs() < 1e-9, "pinky abd {}", a[16]);
         assert!(a[5].abs() < 1e-9);
         // The rig's thumb metacarpal at rest is close to our thumb's rest direction.
-        assert!(a[0].abs() < 0.1 && a[1].abs() < 0.1, "thumb cmc {:?}", &a[..2]);
+        assert!(
+            a[0].abs() < 0.1 && a[1].abs() < 0.1,
+            "thumb cmc {:?}",
+            &a[..2]
+        );
         // Flexing the rig's index PIP by +0.7 about +x gives +0.7 in our convention.
         let mut pose = pose.clone();
         let flex = UnitQuaternion::from_axis_angle(&Vector3::x_axis(), 0.7);
@@ -396,7 +407,11 @@ mod tests {
             pose.bones[b].rotation = flex;
         }
         let a = r.retarget(&pose);
-        assert!((a[6] - 0.7).abs() < 1e-9 && a[7].abs() < 1e-9, "{:?}", &a[4..8]);
+        assert!(
+            (a[6] - 0.7).abs() < 1e-9 && a[7].abs() < 1e-9,
+            "{:?}",
+            &a[4..8]
+        );
     }
 
     #[test]

@@ -82,7 +82,11 @@ pub fn pose_corpus(recorded: &[AnimbankPose]) -> Result<PoseCorpus> {
 
 /// Fit the project prior to a corpus (htrack grouping, all components kept).
 pub fn fit_prior(corpus: &PoseCorpus) -> Result<PcaPrior> {
-    Ok(PcaPrior::fit(&htrack_groups(), &DIGIT_DOFS, &corpus.samples)?)
+    Ok(PcaPrior::fit(
+        &htrack_groups(),
+        &DIGIT_DOFS,
+        &corpus.samples,
+    )?)
 }
 
 /// The project prior with its file description: the corpus of [`pose_corpus`] with the

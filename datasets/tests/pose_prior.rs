@@ -84,7 +84,10 @@ fn sets(held_out: &[Vec<f64>], limits: &[[f64; 2]; 20]) -> Sets {
         }
     }
     let mut natural = vec![
-        ("open/fist/pinch/point", key(&["open", "fist", "pinch_index", "point"])),
+        (
+            "open/fist/pinch/point",
+            key(&["open", "fist", "pinch_index", "point"]),
+        ),
         ("library motions (seed 3)", motions),
     ];
     if !held_out.is_empty() {
@@ -122,11 +125,7 @@ fn sets(held_out: &[Vec<f64>], limits: &[[f64; 2]; 20]) -> Sets {
     }
     let mut rng = ChaCha8Rng::seed_from_u64(5);
     let uniform: Vec<Vec<f64>> = (0..300)
-        .map(|_| {
-            (0..20)
-                .map(|i| rng.random_range(lo(i)..=hi(i)))
-                .collect()
-        })
+        .map(|_| (0..20).map(|i| rng.random_range(lo(i)..=hi(i))).collect())
         .collect();
     Sets {
         natural,
@@ -152,8 +151,7 @@ fn check(label: &str, prior: &PcaPrior, sets: &Sets, skeleton: &Skeleton) {
             .map(|d| term.energy(&set(skeleton, d)).unwrap())
             .collect()
     };
-    let natural: Vec<(&str, Vec<f64>)> =
-        sets.natural.iter().map(|(n, s)| (*n, score(s))).collect();
+    let natural: Vec<(&str, Vec<f64>)> = sets.natural.iter().map(|(n, s)| (*n, score(s))).collect();
     let unnatural: Vec<(&str, Vec<f64>)> =
         sets.unnatural.iter().map(|(n, s)| (*n, score(s))).collect();
     eprintln!("{label}: E_pose medians");
@@ -185,10 +183,8 @@ fn natural_poses_score_better_than_unnatural_ones() {
     let retarget = Retargeter::default_template();
     let recorded = animbank().unwrap_or_default();
     // Hold out every 5th recorded pose: fit on the rest, score the held-out ones.
-    let (train, test): (Vec<_>, Vec<_>) = recorded
-        .iter()
-        .enumerate()
-        .partition(|(i, _)| i % 5 != 0);
+    let (train, test): (Vec<_>, Vec<_>) =
+        recorded.iter().enumerate().partition(|(i, _)| i % 5 != 0);
     let train: Vec<AnimbankPose> = train.into_iter().map(|(_, p)| p.clone()).collect();
     let held_out: Vec<Vec<f64>> = test
         .into_iter()

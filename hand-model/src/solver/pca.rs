@@ -251,7 +251,11 @@ impl PcaPrior {
     /// assert_eq!(prior.groups[1].num_latent(), 16);
     /// assert!(prior.groups[1].variances[0] >= prior.groups[1].variances[1]);
     /// ```
-    pub fn fit(groups: &[(&str, &[&str])], dof_names: &[&str], samples: &[Vec<f64>]) -> Result<Self> {
+    pub fn fit(
+        groups: &[(&str, &[&str])],
+        dof_names: &[&str],
+        samples: &[Vec<f64>],
+    ) -> Result<Self> {
         let bad = |reason: String| ModelError::InvalidArgument {
             name: "samples",
             reason,
@@ -278,7 +282,9 @@ impl PcaPrior {
                 .iter()
                 .map(|d| {
                     dof_names.iter().position(|n| n == d).ok_or_else(|| {
-                        bad(format!("group `{name}`: DOF `{d}` is not among the sample names"))
+                        bad(format!(
+                            "group `{name}`: DOF `{d}` is not among the sample names"
+                        ))
                     })
                 })
                 .collect::<Result<_>>()?;
@@ -343,8 +349,11 @@ impl PcaPrior {
         static PRIOR: std::sync::OnceLock<PcaPrior> = std::sync::OnceLock::new();
         PRIOR
             .get_or_init(|| {
-                Self::from_json(PROJECT_PRIOR_JSON, Path::new("hand-model/data/pose-prior.json"))
-                    .expect("the embedded project prior is valid")
+                Self::from_json(
+                    PROJECT_PRIOR_JSON,
+                    Path::new("hand-model/data/pose-prior.json"),
+                )
+                .expect("the embedded project prior is valid")
             })
             .clone()
     }
@@ -395,7 +404,10 @@ impl PcaPrior {
                 source,
                 "version",
                 None,
-                format!("{}, this build reads version {PCA_PRIOR_VERSION}", file.version),
+                format!(
+                    "{}, this build reads version {PCA_PRIOR_VERSION}",
+                    file.version
+                ),
             ));
         }
         if file.groups.is_empty() {
@@ -409,7 +421,10 @@ impl PcaPrior {
                     source,
                     "groups.components",
                     Some(gi),
-                    format!("component {c} has {} entries for {k} DOFs", g.components[c].len()),
+                    format!(
+                        "component {c} has {} entries for {k} DOFs",
+                        g.components[c].len()
+                    ),
                 ));
             }
             let m = g.components.len();
@@ -830,13 +845,19 @@ mod tests {
         let src = Path::new("bad.json");
         let bad = |t: &str, needle: &str| {
             let e = PcaPrior::from_json(t, src).unwrap_err().to_string();
-            assert!(e.contains("bad.json") && e.contains(needle), "{needle}: {e}");
+            assert!(
+                e.contains("bad.json") && e.contains(needle),
+                "{needle}: {e}"
+            );
         };
         bad("", "not a hands-pca-prior");
         bad("[1, 2", "not a hands-pca-prior");
         bad(&text.replace("hands-pca-prior", "other"), "format");
         bad(&text.replace("\"version\": 1", "\"version\": 9"), "version");
-        bad(&text.replace("\"groups\"", "\"extra\": 1, \"groups\""), "unknown field");
+        bad(
+            &text.replace("\"groups\"", "\"extra\": 1, \"groups\""),
+            "unknown field",
+        );
         let v: serde_json::Value = serde_json::from_str(&text).unwrap();
         let edit = |f: &dyn Fn(&mut serde_json::Value)| {
             let mut v = v.clone();
