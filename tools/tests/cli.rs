@@ -133,6 +133,49 @@ fn model_show_and_export() {
 }
 
 #[test]
+fn prior_build_writes_a_loadable_prior() {
+    let d = tmp("prior");
+    let out = d.join("prior.json");
+    let (ok, text) = hands(&["prior", "build", "--out", out.to_str().expect("utf8")]);
+    assert!(ok, "{text}");
+    assert!(
+        text.contains("fingers") && text.contains("explain"),
+        "{text}"
+    );
+    let prior = hand_model::solver::PcaPrior::load_json(&out).expect("loadable");
+    assert_eq!(prior.groups.len(), 2);
+    assert_eq!(prior.groups[1].num_latent(), 16);
+    let bank = std::path::Path::new(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../../shared/reference/pose-corpus-realsense/animbank.pose"
+    ));
+    if !bank.exists() {
+        eprintln!("skipped the animbank build: {} absent", bank.display());
+        return;
+    }
+    let out = d.join("full.json");
+    let (ok, text) = hands(&[
+        "prior",
+        "build",
+        "--animbank",
+        bank.to_str().expect("utf8"),
+        "--out",
+        out.to_str().expect("utf8"),
+    ]);
+    assert!(ok, "{text}");
+    let built = std::fs::read_to_string(&out).expect("written");
+    let committed = std::fs::read_to_string(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../hand-model/data/pose-prior.json"
+    ))
+    .expect("committed prior");
+    assert_eq!(
+        built, committed,
+        "the documented command regenerates the committed file"
+    );
+}
+
+#[test]
 fn bad_inputs_fail_clearly() {
     let d = tmp("bad");
     let cases: Vec<(Vec<String>, &str)> = vec![
@@ -177,6 +220,17 @@ fn bad_inputs_fail_clearly() {
                 d.join("o.mcap").display().to_string(),
             ],
             "missing",
+        ),
+        (
+            vec![
+                "prior".into(),
+                "build".into(),
+                "--animbank".into(),
+                d.join("no.pose").display().to_string(),
+                "--out".into(),
+                d.join("p.json").display().to_string(),
+            ],
+            "no.pose",
         ),
     ];
     for (args, needle) in cases {

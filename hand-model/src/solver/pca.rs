@@ -750,4 +750,166 @@ mod tests {
         assert!(close(fingers.variances[0], 2.105993));
         assert_eq!(fingers.dofs[4], "middle_mcp_abd");
     }
+
+    /// Deterministic pseudo-random numbers in [−1, 1) (no dev-dependency needed here).
+    fn lcg(state: &mut u64) -> f64 {
+        *state = state
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
+        ((*state >> 11) as f64 / (1u64 << 53) as f64) * 2.0 - 1.0
+    }
+
+    #[test]
+    fn fit_recovers_a_known_covariance() {
+        // Samples μ + Σ_j s_j a_j d_j with orthonormal directions d_j and scales s_j.
+        let names = ["a", "b", "c", "d"];
+        let d = [
+            [0.5, 0.5, 0.5, 0.5],
+            [0.5, -0.5, 0.5, -0.5],
+            [0.5, 0.5, -0.5, -0.5],
+            [0.5, -0.5, -0.5, 0.5],
+        ];
+        let scales = [2.0, 1.0, 0.3, 0.05];
+        let mu = [0.1, -0.2, 0.3, 0.4];
+        let mut st = 7u64;
+        let samples: Vec<Vec<f64>> = (0..20000)
+            .map(|_| {
+                let mut x = mu.to_vec();
+                for (dj, s) in d.iter().zip(scales) {
+                    let a = lcg(&mut st) * s;
+                    x.iter_mut().zip(dj).for_each(|(x, dv)| *x += a * dv);
+                }
+                x
+            })
+            .collect();
+        let groups: [(&str, &[&str]); 1] = [("all", &names)];
+        let prior = PcaPrior::fit(&groups, &names, &samples).unwrap();
+        let g = &prior.groups[0];
+        assert_eq!((g.num_dofs(), g.num_latent()), (4, 4));
+        for (m, e) in g.mean.iter().zip(mu) {
+            assert!((m - e).abs() < 0.03, "{m} vs {e}");
+        }
+        // Uniform on [−s, s]: variance s²/3.
+        for (v, s) in g.variances.iter().zip(scales) {
+            let e = s * s / 3.0;
+            assert!((v - e).abs() < 0.05 * e, "{v} vs {e}");
+        }
+        assert!(g.variances.windows(2).all(|w| w[0] >= w[1]));
+        assert!(g.orthonormality_error() < 1e-12);
+        for (j, dj) in d.iter().enumerate().take(2) {
+            let c: f64 = (0..4).map(|i| g.basis[(i, j)] * dj[i]).sum();
+            assert!(c.abs() > 0.99, "component {j}: |cos| = {c}");
+            // Deterministic sign: the largest entry is positive.
+            let col = g.basis.column(j);
+            assert!(col[col.iamax()] > 0.0);
+        }
+        assert!(g.explained_variance(2) > 0.95 && g.explained_variance(4) == 1.0);
+        // A group follows its own DOF order.
+        let split: [(&str, &[&str]); 2] = [("ba", &["b", "a"]), ("dc", &["d", "c"])];
+        let two = PcaPrior::fit(&split, &names, &samples).unwrap();
+        assert_eq!(two.groups[0].dofs, ["b", "a"]);
+        assert!((two.groups[0].mean[0] - mu[1]).abs() < 0.03);
+        let overlap: [(&str, &[&str]); 2] = [("ab", &["a", "b"]), ("bc", &["b", "c"])];
+        assert!(PcaPrior::fit(&overlap, &names, &samples).is_err());
+        // Refusals.
+        assert!(PcaPrior::fit(&groups, &names, &samples[..1]).is_err());
+        assert!(PcaPrior::fit(&groups, &names[..3], &samples).is_err());
+        let missing: [(&str, &[&str]); 1] = [("x", &["zz"])];
+        assert!(PcaPrior::fit(&missing, &names, &samples).is_err());
+        let mut nan = samples[..10].to_vec();
+        nan[3][1] = f64::NAN;
+        assert!(PcaPrior::fit(&groups, &names, &nan).is_err());
+        // Rank-deficient samples: the floor keeps the variances positive.
+        let flat: Vec<Vec<f64>> = (0..10).map(|i| vec![i as f64, 0.0, 0.0, 0.0]).collect();
+        let p = PcaPrior::fit(&groups, &names, &flat).unwrap();
+        assert_eq!(p.groups[0].variances[3], PCA_VARIANCE_FLOOR);
+    }
+
+    #[test]
+    fn json_round_trips_and_refuses_bad_files() {
+        let prior = PcaPrior::project_default();
+        let text = prior.to_json("test");
+        let back = PcaPrior::from_json(&text, Path::new("<memory>")).unwrap();
+        assert_eq!(back, prior, "float_roundtrip JSON is exact");
+        let dir = std::env::temp_dir().join(format!("hands-pca-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let path = dir.join("prior.json");
+        prior.save_json(&path, "saved").unwrap();
+        assert_eq!(PcaPrior::load_json(&path).unwrap(), prior);
+        let leftovers = std::fs::read_dir(&dir).unwrap().count();
+        assert_eq!(leftovers, 1, "no temporary file left");
+        let e = PcaPrior::load_json(&dir.join("missing.json")).unwrap_err();
+        assert!(e.to_string().contains("missing.json"), "{e}");
+        std::fs::remove_dir_all(&dir).unwrap();
+
+        let src = Path::new("bad.json");
+        let bad = |t: &str, needle: &str| {
+            let e = PcaPrior::from_json(t, src).unwrap_err().to_string();
+            assert!(
+                e.contains("bad.json") && e.contains(needle),
+                "{needle}: {e}"
+            );
+        };
+        bad("", "not a hands-pca-prior");
+        bad("[1, 2", "not a hands-pca-prior");
+        bad(&text.replace("hands-pca-prior", "other"), "format");
+        bad(&text.replace("\"version\": 1", "\"version\": 9"), "version");
+        bad(
+            &text.replace("\"groups\"", "\"extra\": 1, \"groups\""),
+            "unknown field",
+        );
+        let v: serde_json::Value = serde_json::from_str(&text).unwrap();
+        let edit = |f: &dyn Fn(&mut serde_json::Value)| {
+            let mut v = v.clone();
+            f(&mut v);
+            v.to_string()
+        };
+        bad(&edit(&|v| v["groups"] = serde_json::json!([])), "no groups");
+        bad(
+            &edit(&|v| v["groups"][0]["components"][1] = serde_json::json!([1.0])),
+            "component 1",
+        );
+        bad(
+            &edit(&|v| v["groups"][0]["variances"][0] = serde_json::json!(-1.0)),
+            "positive",
+        );
+        bad(
+            &edit(&|v| v["groups"][1]["mean"] = serde_json::json!([0.0])),
+            "means",
+        );
+        bad(
+            &edit(&|v| v["groups"][1]["dofs"][0] = serde_json::json!("thumb_cmc_abd")),
+            "repeated",
+        );
+        bad(
+            &edit(&|v| v["groups"][0]["components"][0][0] = serde_json::json!(3.0)),
+            "orthonormal",
+        );
+    }
+
+    #[test]
+    fn project_prior_is_embedded_with_htrack_grouping() {
+        let prior = PcaPrior::project_default();
+        let [thumb, fingers] = &prior.groups[..] else {
+            panic!("two groups")
+        };
+        let groups = htrack_groups();
+        assert_eq!(thumb.dofs, groups[0].1);
+        assert_eq!(fingers.dofs, groups[1].1);
+        assert_eq!((thumb.num_latent(), fingers.num_latent()), (4, 16));
+        assert!(thumb.orthonormality_error() < 1e-9 && fingers.orthonormality_error() < 1e-9);
+        // Positive flexion convention: the mean finger flexions are positive.
+        for i in [1, 2, 5, 6, 9, 10, 13, 14] {
+            assert!(fingers.mean[i] > 0.0, "{}", fingers.dofs[i]);
+        }
+        for g in [thumb, fingers] {
+            eprintln!(
+                "{}: variances {:.4?}, 3 components explain {:.1} %",
+                g.name,
+                g.variances,
+                100.0 * g.explained_variance(HTRACK_LATENT_DIMS)
+            );
+            assert!(g.explained_variance(HTRACK_LATENT_DIMS) > 0.8);
+        }
+    }
 }

@@ -281,12 +281,13 @@ fn every_term_gradient_matches_finite_differences() {
         let c = check_gradient(sk, &pose, nd, &damp, &mut ctx, &mut repose, 1e-6).unwrap();
         assert_eq!(c.max_abs_error(), 0.0);
 
-        // The pose prior, all three forms, on a synthetic prior.
+        // The pose prior, all forms, on a synthetic prior.
         let prior = synthetic_prior(sk, &mut rng, 4);
         for form in [
             PosePriorForm::Exact,
             PosePriorForm::Projection,
             PosePriorForm::Augmented,
+            PosePriorForm::Subspace,
         ] {
             let params = PosePriorParams {
                 form,
@@ -544,6 +545,61 @@ fn exact_and_augmented_pose_priors_give_the_same_steps() {
     }
     assert_eq!((calls_exact, calls_aug), (6, 6));
     assert!(r_exact.energy_after < r_exact.energy_before);
+}
+
+#[test]
+fn subspace_pose_prior_holds_the_solve_in_the_pca_subspace() {
+    let t = default_right_hand();
+    let sk = &t.skeleton;
+    let mut rng = ChaCha8Rng::seed_from_u64(23);
+    let prior = synthetic_prior(sk, &mut rng, 3);
+    let params = PosePriorParams {
+        form: PosePriorForm::Subspace,
+        ..PosePriorParams::default()
+    };
+    let term = PosePrior::new(sk, &prior, &params).unwrap();
+    assert_eq!(term.num_aux(), 0);
+    // Energy: ω₄·10⁶ across the subspace, the Mahalanobis ω₅ Σ z²/σ² inside it.
+    let g = &prior.groups[1];
+    let p = &g.basis;
+    let mut pose = random_pose(sk, &mut rng, 0.0);
+    for g in &prior.groups {
+        set_group(sk, &mut pose, g, &vec![0.0; g.num_dofs()]);
+    }
+    let raw = nalgebra::DVector::from_fn(g.num_dofs(), |_, _| rng.random_range(-1.0..1.0));
+    let perp = (&raw - p * (p.transpose() * &raw)) * 0.01;
+    let z = [0.3, -0.2, 0.1];
+    let inside = p * nalgebra::DVector::from_column_slice(&z);
+    let mut q = pose.clone();
+    set_group(sk, &mut q, g, (&inside + &perp).as_slice());
+    let e = term.energy(&q.values).unwrap();
+    let mahalanobis: f64 = z.iter().zip(&g.variances).map(|(z, v)| z * z / v).sum();
+    let expected = 1e3 * SUBSPACE_STIFFNESS * perp.norm_squared() + mahalanobis;
+    assert!((e - expected).abs() < 1e-6 * expected, "{e} vs {expected}");
+    // A solve toward targets off the subspace ends (numerically) inside it.
+    let truth = random_pose(sk, &mut rng, 0.1);
+    let fit = targets_term(&t, &truth);
+    let start = perturbed(sk, &truth, &mut rng, 0.1, 0.2);
+    let solver = LmSolver::new(sk, 0, opts(10, 1, 1.0)).unwrap();
+    let mut ws = solver.workspace();
+    let mut pose = start.clone();
+    let mut ctx = SkeletonCtx::new(sk, &pose);
+    let terms: [&dyn EnergyTerm<SkeletonCtx>; 2] = [&fit, &term];
+    solver
+        .solve(&mut ws, sk, &mut pose, &mut ctx, &terms, &mut RePose)
+        .unwrap();
+    for (gi, g) in prior.groups.iter().enumerate() {
+        let y: Vec<f64> = g
+            .dofs
+            .iter()
+            .zip(&g.mean)
+            .map(|(n, m)| pose.values[sk.dof_index(n).unwrap()] - m)
+            .collect();
+        let y = nalgebra::DVector::from_vec(y);
+        let lat = nalgebra::DVector::from_vec(term.latent(&pose.values, gi).unwrap());
+        let off = (&y - &g.basis * lat).norm();
+        assert!(off < 1e-3, "group {gi}: {off} rad off the subspace");
+    }
 }
 
 struct AuxCounter<'a> {
