@@ -307,7 +307,19 @@ fn write_section(md: &mut String, exp: &Experiment, o: &[Outcome]) -> Result<()>
         )?;
     }
     let (a, b) = (&o[0], &o[1]);
-    let verdict = if a.score < b.score {
+    // Below this relative difference a single synthetic sequence cannot separate the variants.
+    const MARGIN: f64 = 0.03;
+    let rel = (b.score - a.score) / b.score.abs().max(1e-12);
+    let verdict = if rel.abs() < MARGIN {
+        format!(
+            "**Inconclusive**: {} scores {:.3} vs {:.3} for {}, within {:.0}% of each other.",
+            a.label,
+            a.score,
+            b.score,
+            b.label,
+            100.0 * MARGIN
+        )
+    } else if a.score < b.score {
         format!(
             "**Reproduces**: {} scores {:.3} vs {:.3} for {} ({:.0}% lower).",
             a.label,
