@@ -2,6 +2,7 @@
 
 mod convert;
 mod demo;
+mod interrupt;
 mod model;
 mod prior;
 mod progress;
@@ -58,6 +59,7 @@ enum Command {
 
 fn main() -> anyhow::Result<()> {
     let cli = Cli::parse();
+    interrupt::install();
     match cli.command {
         Command::Demo(args) => demo::run(args),
         Command::Model(cmd) => model::run(cmd),

@@ -107,6 +107,10 @@ pub fn run(args: SynthArgs) -> Result<()> {
     let mut pose = Pose::zeros(&template.skeleton);
     let mut times = Vec::with_capacity(frames);
     for k in 0..frames {
+        if crate::interrupt::requested() {
+            eprintln!("interrupted after {k} frames; the sequence holds those");
+            break;
+        }
         let t = k as f64 / args.fps;
         motion.pose_into(t, &mut pose);
         let t0 = Instant::now();

@@ -212,7 +212,7 @@ pub fn run(args: TrackArgs) -> Result<()> {
     let mut flags: BTreeMap<String, usize> = BTreeMap::new();
     let (mut errors, mut frames) = (Vec::new(), 0usize);
     while let Some(item) = reader.next_frame() {
-        if args.frames.is_some_and(|m| frames >= m) {
+        if args.frames.is_some_and(|m| frames >= m) || crate::interrupt::requested() {
             break;
         }
         let (frame, truth) =
@@ -249,7 +249,12 @@ pub fn run(args: TrackArgs) -> Result<()> {
     bar.finish_and_clear();
     write_atomic(&args.out, lines.as_bytes())
         .with_context(|| format!("writing {}", args.out.display()))?;
-    eprintln!("tracked {frames} frames → {}", args.out.display());
+    let note = if crate::interrupt::requested() {
+        " (interrupted)"
+    } else {
+        ""
+    };
+    eprintln!("tracked {frames} frames{note} → {}", args.out.display());
     let stages: Vec<String> = stage_us
         .into_iter()
         .map(|(k, v)| format!("{k} {:.0}", median(v)))
