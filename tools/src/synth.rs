@@ -131,7 +131,7 @@ pub fn run(args: SynthArgs) -> Result<()> {
     }
     bar.finish_and_clear();
     times.sort_by(f64::total_cmp);
-    let median_ms = times[times.len() / 2] * 1e3;
+    let median_ms = times.get(times.len() / 2).map_or(f64::NAN, |t| t * 1e3);
     eprintln!(
         "synthesized {frames} frames of `{}` for subject `{}` ({} noise, {}×{}): median {median_ms:.2} ms/frame (render + noise)",
         args.motion, subject.name, args.noise, camera.width, camera.height
