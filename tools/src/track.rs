@@ -10,7 +10,7 @@ use clap::Args;
 use hand_model::cylinder::{default_right_hand_cylinders, CylinderModel};
 use hand_model::solver::PcaPrior;
 use htrack_icp::{Tracker, TrackerConfig};
-use sensor_io::io::{open_sequence, write_atomic};
+use sensor_io::io::{open_sequence, write_atomic, McapWriter, SequenceWriter, TRACK_TOPIC};
 use sensor_io::preprocess::{
     DepthOnlyParams, PreprocessConfig, PreprocessedFrame, Preprocessor, Segmentation,
     WristbandParams,
@@ -30,7 +30,8 @@ pub struct TrackArgs {
     /// `hands synth` subject) — the last two give the cylinders fitted to that sphere-mesh.
     #[arg(long, default_value = "cylinders")]
     pub model: String,
-    /// Output: `.jsonl` (one JSON object per frame, DESIGN.md "Tracker output").
+    /// Output: `.jsonl` (one JSON object per frame, DESIGN.md "Tracker output") or `.mcap` (the
+    /// input frames plus the records on `/hand/track`, for Foxglove).
     #[arg(long)]
     pub out: PathBuf,
     /// Tracker settings as JSON (any subset of the fields; the flags below override it).
@@ -178,8 +179,12 @@ fn keypoint_errors(track: &HandRecord, truth: &HandRecord) -> Option<(f64, f64)>
 
 /// Run `hands track`.
 pub fn run(args: TrackArgs) -> Result<()> {
-    if args.out.extension().and_then(|e| e.to_str()) != Some("jsonl") {
-        bail!("--out must end in .jsonl, got {}", args.out.display());
+    let ext = args.out.extension().and_then(|e| e.to_str());
+    if !matches!(ext, Some("jsonl") | Some("mcap")) {
+        bail!(
+            "--out must end in .jsonl or .mcap, got {}",
+            args.out.display()
+        );
     }
     let model = load_model(&args.model)?;
     let prior = load_prior(&args.prior)?;
@@ -206,6 +211,13 @@ pub fn run(args: TrackArgs) -> Result<()> {
         (n, m) => n.or(m),
     };
     let bar = crate::progress::frames_bar(total, "track");
+    let mut mcap = match ext {
+        Some("mcap") => Some(
+            McapWriter::create_with_record_topic(&args.out, &camera, TRACK_TOPIC)
+                .with_context(|| format!("creating {}", args.out.display()))?,
+        ),
+        _ => None,
+    };
     let mut lines = String::new();
     let mut frame_pre = PreprocessedFrame::default();
     let mut stage_us: BTreeMap<String, Vec<f64>> = BTreeMap::new();
@@ -241,14 +253,24 @@ pub fn run(args: TrackArgs) -> Result<()> {
         if !rec.is_finite() {
             bail!("frame {frames}: the tracker produced a non-finite record (a bug)");
         }
-        lines.push_str(&serde_json::to_string(&rec)?);
-        lines.push('\n');
+        match mcap.as_mut() {
+            Some(w) => w
+                .write(&frame, Some(&rec))
+                .with_context(|| format!("writing {}", args.out.display()))?,
+            None => {
+                lines.push_str(&serde_json::to_string(&rec)?);
+                lines.push('\n');
+            }
+        }
         frames += 1;
         bar.inc(1);
     }
     bar.finish_and_clear();
-    write_atomic(&args.out, lines.as_bytes())
-        .with_context(|| format!("writing {}", args.out.display()))?;
+    match mcap.as_mut() {
+        Some(w) => w.finish(),
+        None => write_atomic(&args.out, lines.as_bytes()),
+    }
+    .with_context(|| format!("writing {}", args.out.display()))?;
     let note = if crate::interrupt::requested() {
         " (interrupted)"
     } else {

@@ -310,7 +310,7 @@ fn track_rejects_bad_arguments_clearly() {
     let (ok, text) = hands(&["track", &s(&d.join("missing.mcap")), "--out", &s(&out)]);
     assert!(!ok && text.contains("missing.mcap"), "{text}");
     let (ok, text) = hands(&["track", &s(&d), "--out", &s(&d.join("t.txt"))]);
-    assert!(!ok && text.contains(".jsonl"), "{text}");
+    assert!(!ok && text.contains(".jsonl or .mcap"), "{text}");
     let (ok, text) = hands(&["track", &s(&d), "--model", "spheres", "--out", &s(&out)]);
     assert!(!ok && text.contains("--model"), "{text}");
     let (ok, text) = hands(&["track", &s(&d), "--prior", "bogus", "--out", &s(&out)]);
