@@ -282,23 +282,10 @@ fn solve_synthetic(
         damping: DampingParams::none(),
         ..LmOptions::default()
     };
-    let solver = LmSolver::new(sk, 0, options).unwrap();
-    let mut ws = solver.workspace();
     let mut ctx = TrackingCtx::new(&model, View::Orthographic, IrlsParams::default());
     ctx.set_points(&points);
     let terms: [&dyn EnergyTerm<TrackingCtx<'_>>; 3] = [&e3d, &limits, &damping];
-    let mut pose = start.clone();
-    let report = solver
-        .solve(
-            &mut ws,
-            sk,
-            &mut pose,
-            &mut ctx,
-            &terms,
-            &mut CorrespondenceCallback,
-        )
-        .unwrap()
-        .clone();
+    let (pose, report) = solve_terms(&mut ctx, &terms, options, &start);
     let before = keypoint_error(&model, &start, &target);
     let after = keypoint_error(&model, &pose, &target);
     eprintln!(
@@ -359,4 +346,30 @@ fn update_timing_on_the_full_cloud() {
             model.front_facing_point_brute_force(&posed, p, View::Orthographic)
         );
     }
+}
+
+/// One LM solve of `terms` from `start` (the context refreshed before every iteration);
+/// returns the solved pose and the report. Shared by the term modules' tests.
+pub(crate) fn solve_terms<'m>(
+    ctx: &mut TrackingCtx<'m>,
+    terms: &[&dyn EnergyTerm<TrackingCtx<'m>>],
+    options: LmOptions,
+    start: &Pose,
+) -> (Pose, hand_model::solver::LmReport) {
+    let sk = &ctx.model().skeleton;
+    let solver = LmSolver::new(sk, 0, options).unwrap();
+    let mut ws = solver.workspace();
+    let mut pose = start.clone();
+    let report = solver
+        .solve(
+            &mut ws,
+            sk,
+            &mut pose,
+            ctx,
+            terms,
+            &mut CorrespondenceCallback,
+        )
+        .unwrap()
+        .clone();
+    (pose, report)
 }

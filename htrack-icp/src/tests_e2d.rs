@@ -4,14 +4,14 @@
 use hand_model::cylinder::{default_right_hand_cylinders, CylinderModel, CylinderRaster, View};
 use hand_model::kinematics::Pose;
 use hand_model::solver::terms::{Damping, DampingParams, JointLimits, JointLimitsParams};
-use hand_model::solver::{EnergyTerm, LmOptions, LmSolver, NormalEquations, PoseContext};
+use hand_model::solver::{EnergyTerm, LmOptions, NormalEquations, PoseContext};
 use nalgebra::{DMatrix, DVector, Matrix2xX};
 use sensor_io::dt::DistanceTransform;
 use sensor_io::{Camera, Mask};
 
 use crate::terms::E2d;
 use crate::tests::{camera, target_pose};
-use crate::{CorrespondenceCallback, IrlsParams, SensorView, TrackingCtx};
+use crate::{IrlsParams, SensorView, TrackingCtx};
 
 /// The sensor camera of the synthetic scenes (the intrinsics of [`camera`]).
 fn sensor_camera() -> Camera {
@@ -166,24 +166,11 @@ fn e2d_alone_moves_a_shifted_model_back_into_the_silhouette() {
         damping: DampingParams::none(),
         ..LmOptions::default()
     };
-    let solver = LmSolver::new(sk, 0, options).unwrap();
-    let mut ws = solver.workspace();
     let mut ctx = TrackingCtx::new(&model, View::Orthographic, IrlsParams::default());
     *ctx.sensor_mut() = silhouette_of(&model, &target);
     ctx.update(&start, false).unwrap();
     let before = outside_count(&ctx);
-    let mut pose = start.clone();
-    let report = solver
-        .solve(
-            &mut ws,
-            sk,
-            &mut pose,
-            &mut ctx,
-            &terms,
-            &mut CorrespondenceCallback,
-        )
-        .unwrap()
-        .clone();
+    let (pose, report) = crate::tests::solve_terms(&mut ctx, &terms, options, &start);
     ctx.update(&pose, false).unwrap();
     let after = outside_count(&ctx);
     let (e0, e1) = (

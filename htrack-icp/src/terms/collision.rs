@@ -337,11 +337,11 @@ mod tests {
     use hand_model::kinematics::Pose;
     use hand_model::solver::check::check_gradient;
     use hand_model::solver::terms::{DampingParams, JointLimits, JointLimitsParams};
-    use hand_model::solver::{EnergyTerm, LmOptions, LmSolver, NormalEquations};
+    use hand_model::solver::{EnergyTerm, LmOptions, NormalEquations};
     use hand_model::spheremesh::default_right_hand;
 
     use super::*;
-    use crate::{CorrespondenceCallback, IrlsParams};
+    use crate::IrlsParams;
 
     /// Index and middle abducted into each other (a little flexed, so the axes are skew and the
     /// closest points interior), the hand somewhere in front of the camera.
@@ -469,23 +469,10 @@ mod tests {
             damping: DampingParams::uniform(1.0),
             ..LmOptions::default()
         };
-        let solver = LmSolver::new(sk, 0, options).unwrap();
-        let mut ws = solver.workspace();
         let mut ctx = ctx_at(&model, &start);
         let before: f64 = term.contacts(&ctx).iter().map(|c| c.2).fold(0.0, f64::max);
         let terms: [&dyn EnergyTerm<TrackingCtx<'_>>; 2] = [&term, &limits];
-        let mut pose = start.clone();
-        let report = solver
-            .solve(
-                &mut ws,
-                sk,
-                &mut pose,
-                &mut ctx,
-                &terms,
-                &mut CorrespondenceCallback,
-            )
-            .unwrap()
-            .clone();
+        let (pose, report) = crate::tests::solve_terms(&mut ctx, &terms, options, &start);
         ctx.update(&pose, false).unwrap();
         let after: f64 = term.contacts(&ctx).iter().map(|c| c.2).fold(0.0, f64::max);
         let moved = (0..sk.num_dofs())

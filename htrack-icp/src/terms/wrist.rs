@@ -132,12 +132,12 @@ mod tests {
     use hand_model::kinematics::Pose;
     use hand_model::solver::check::check_gradient;
     use hand_model::solver::terms::DampingParams;
-    use hand_model::solver::{LmOptions, LmSolver};
+    use hand_model::solver::LmOptions;
     use hand_model::spheremesh::default_right_hand;
     use sensor_io::Camera;
 
     use super::*;
-    use crate::{CorrespondenceCallback, IrlsParams};
+    use crate::IrlsParams;
 
     fn camera() -> Camera {
         Camera::new("test", 320, 240, 300.0, 300.0, 160.0, 120.0).unwrap()
@@ -250,7 +250,6 @@ mod tests {
     #[test]
     fn lm_pulls_a_displaced_wrist_onto_the_band_line() {
         let model = default_right_hand_cylinders();
-        let sk = &model.skeleton;
         let target = target_pose(&model);
         let band = band_of(&model, &target);
         let mut start = target.clone();
@@ -265,21 +264,8 @@ mod tests {
             damping: DampingParams::uniform(1.0),
             ..LmOptions::default()
         };
-        let solver = LmSolver::new(sk, 0, options).unwrap();
-        let mut ws = solver.workspace();
         let terms: [&dyn EnergyTerm<TrackingCtx<'_>>; 1] = [&term];
-        let mut pose = start.clone();
-        let report = solver
-            .solve(
-                &mut ws,
-                sk,
-                &mut pose,
-                &mut ctx,
-                &terms,
-                &mut CorrespondenceCallback,
-            )
-            .unwrap()
-            .clone();
+        let (pose, report) = crate::tests::solve_terms(&mut ctx, &terms, options, &start);
         ctx.update(&pose, false).unwrap();
         let after = line_distance(&ctx);
         eprintln!(
