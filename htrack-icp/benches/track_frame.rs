@@ -1,5 +1,5 @@
-//! One full tracking frame of the Ch. 2 tracker (issue 4 "Speed"): 2500 sensor points, 1 rigid
-//! + 7 full LM iterations, silhouette term included, on one core, warm-started a few mm and
+//! One full tracking frame of the Ch. 2 tracker (issue 4 "Speed"): 2500 sensor points, one rigid
+//! and seven full LM iterations, silhouette term included, on one core, warm-started a few mm and
 //! degrees off the truth; and, in the same run, its stages as baselines.
 //!
 //! The frame is built without the `datasets` crate: the default cylinder hand posed upright
