@@ -45,7 +45,7 @@ fn quantile(v: &mut [f64], q: f64) -> f64 {
 }
 
 /// Segments sampled frames of every (motion, subject, noise) combination; the background wall
-/// alternates between 1100 mm, none and 650 mm (a close wall) from sequence to sequence.
+/// cycles through 1100 mm, none and 650 mm (a close wall) over the (subject, noise) pairs.
 fn measure(params: &DepthOnlyParams) -> Vec<FrameQuality> {
     let base = default_right_hand();
     let cam = Camera::sr300_qvga();
@@ -55,12 +55,14 @@ fn measure(params: &DepthOnlyParams) -> Vec<FrameQuality> {
     let mut scratch = SegmentScratch::default();
     let mut seq = 0usize;
     for motion_name in MOTIONS {
+        let mut combo = 0usize;
         let motion = MotionLibrary::by_name_for(motion_name, 7, &base.skeleton).expect("motion");
         let n = motion.num_frames(60.0);
         for subject_name in SUBJECTS {
             let subject = subject_by_name(subject_name, 11).expect("subject");
             for noise in NOISES {
-                let wall_mm = [Some(1100.0), None, Some(650.0)][seq % 3];
+                let wall_mm = [Some(1100.0), None, Some(650.0)][(combo + combo / 3) % 3];
+                combo += 1;
                 seq += 1;
                 let config = SceneConfig {
                     sensor: SensorModel::by_name(noise).expect("noise"),
@@ -114,11 +116,22 @@ fn measure(params: &DepthOnlyParams) -> Vec<FrameQuality> {
                             Part::Background => {}
                         }
                     }
-                    let precision = if n_mask == 0 { 0.0 } else { ok as f64 / n_mask as f64 };
+                    let precision = if n_mask == 0 {
+                        0.0
+                    } else {
+                        ok as f64 / n_mask as f64
+                    };
                     let recall = tp as f64 / hand_px as f64;
                     if let Ok(dir) = std::env::var("HANDS_SEG_DUMP") {
                         if precision.min(recall) < 0.8 {
-                            dump(&dir, &format!("{motion_name}_{subject_name}_{noise}_{frame}"), &f, &seg, &cam, wrist);
+                            dump(
+                                &dir,
+                                &format!("{motion_name}_{subject_name}_{noise}_{frame}"),
+                                &f,
+                                &seg,
+                                &cam,
+                                wrist,
+                            );
                         }
                     }
                     out.push(FrameQuality {
@@ -150,13 +163,19 @@ fn dump(
     let mut img = image::RgbImage::new(w, h);
     for (i, px) in img.pixels_mut().enumerate() {
         let d = f.frame.depth.data[i] as f64;
-        let g = if d == 0.0 { 0 } else { (255.0 - (d - 200.0) * 0.2).clamp(40.0, 255.0) as u8 };
+        let g = if d == 0.0 {
+            0
+        } else {
+            (255.0 - (d - 200.0) * 0.2).clamp(40.0, 255.0) as u8
+        };
         let m = seg.mask.data[i] != 0;
         let p = cam.backproject((i % w as usize) as f64, (i / w as usize) as f64, d);
         *px = image::Rgb(match (f.parts[i], m) {
             (Part::Hand, true) => [0, g, 0],
             (Part::Hand, false) if d > 0.0 => [g, 0, 0],
-            (Part::Forearm | Part::Wristband, true) if (p - wrist).norm() <= WRIST_SLACK_MM => [0, g, g],
+            (Part::Forearm | Part::Wristband, true) if (p - wrist).norm() <= WRIST_SLACK_MM => {
+                [0, g, g]
+            }
             (Part::Forearm | Part::Wristband, true) => [0, 0, g],
             (Part::Background, true) => [g, g, 0],
             _ => [g / 2, g / 2, g / 2],
@@ -165,7 +184,10 @@ fn dump(
     if let Some(c) = seg.palm_center {
         let q = cam.project(&c);
         for du in -2i32..=2 {
-            let (u, v) = ((q.x as i32 + du).clamp(0, w as i32 - 1), (q.y as i32).clamp(0, h as i32 - 1));
+            let (u, v) = (
+                (q.x as i32 + du).clamp(0, w as i32 - 1),
+                (q.y as i32).clamp(0, h as i32 - 1),
+            );
             img.put_pixel(u as u32, v as u32, image::Rgb([255, 0, 255]));
         }
     }
@@ -196,7 +218,10 @@ fn depth_only_segmentation_matches_the_hand() {
             .filter(|f| f.label.split('/').any(|s| s == *group))
             .cloned()
             .collect();
-        let _ = summarize(&sel, group);
+        let (pm, _, rm, _) = summarize(&sel, group);
+        // Measured (this commit): every group ≥ 0.977 median precision, ≥ 0.955 median recall.
+        assert!(pm >= 0.93, "{group}: median precision {pm:.3}");
+        assert!(rm >= 0.92, "{group}: median recall {rm:.3}");
     }
     let (pm, p10, rm, r10) = summarize(&q, "all");
     let mut worst: Vec<&FrameQuality> = q.iter().collect();
@@ -212,5 +237,34 @@ fn depth_only_segmentation_matches_the_hand() {
         us.last().copied().unwrap_or(0.0)
     );
     assert!(q.len() > 300, "only {} frames measured", q.len());
-    assert!(pm >= 0.0 && p10 >= 0.0 && rm >= 0.0 && r10 >= 0.0);
+    // Measured (this commit): precision median 0.989, p10 0.935; recall median 0.977, p10 0.907
+    // (before: precision 1.000 / 0.736, recall 0.880 / 0.673 — fingers or fists cut off as the
+    // "forearm", wrists cut short).
+    assert!(
+        pm >= 0.96 && p10 >= 0.85,
+        "precision median {pm:.3}, p10 {p10:.3}"
+    );
+    assert!(
+        rm >= 0.95 && r10 >= 0.85,
+        "recall median {rm:.3}, p10 {r10:.3}"
+    );
+}
+
+#[test]
+#[ignore = "parameter sweep, prints a table"]
+fn sweep() {
+    for radius in [220.0, 300.0] {
+        for cut_range in [[60.0, 110.0], [80.0, 110.0], [80.0, 130.0], [95.0, 130.0]] {
+            for cut_palm_radii in [2.4, 2.8] {
+                let p = DepthOnlyParams {
+                    radius,
+                    cut_range,
+                    cut_palm_radii,
+                    ..Default::default()
+                };
+                eprint!("r {radius} cut {cut_range:?} × {cut_palm_radii}: ");
+                let _ = summarize(&measure(&p), "all");
+            }
+        }
+    }
 }

@@ -72,15 +72,20 @@ impl Default for DepthOnlyParams {
         Self {
             near: 150,
             far: 1500,
-            radius: 220.0,
+            radius: 300.0,
             max_step: 25.0,
             cut_palm_radii: 2.4,
-            cut_range: [60.0, 110.0],
+            cut_range: [80.0, 110.0],
             min_pixels: 60,
             max_hand_length: 210.0,
         }
     }
 }
+
+/// Pixels from the image border within which a component pixel is an exit.
+const BORDER_PX: usize = 2;
+/// Growth steps over runs of fewer than this many invalid (zero) pixels.
+const MAX_HOLE_PX: usize = 3;
 
 fn point(depth: &DepthImage, camera: &Camera, i: usize) -> Vector3<f64> {
     let w = depth.width as usize;
@@ -190,29 +195,38 @@ pub fn segment_depth_only(
     while let Some(i) = queue.pop_front() {
         let (u, v) = (i % w, i / w);
         let d0 = depth.data[i] as f64;
-        let mut exit = false;
+        // Within `BORDER_PX` of the image border: sensors often leave the outermost columns
+        // and rows invalid, so the arm "leaves the image" there too.
+        let mut exit = u < BORDER_PX || v < BORDER_PX || u + BORDER_PX >= w || v + BORDER_PX >= h;
         for (du, dv) in [(-1i64, 0i64), (1, 0), (0, -1), (0, 1)] {
-            let (x, y) = (u as i64 + du, v as i64 + dv);
-            if x < 0 || y < 0 || x >= w as i64 || y >= h as i64 {
-                exit = true;
-                continue;
+            // Step over up to `MAX_HOLE_PX - 1` invalid pixels (structured-light dropouts on
+            // fingers and at finger–palm boundaries) to the next valid one.
+            for k in 1..=MAX_HOLE_PX as i64 {
+                let (x, y) = (u as i64 + k * du, v as i64 + k * dv);
+                if x < 0 || y < 0 || x >= w as i64 || y >= h as i64 {
+                    exit = true;
+                    break;
+                }
+                let j = y as usize * w + x as usize;
+                let d = depth.data[j];
+                if d == 0 {
+                    continue;
+                }
+                if out.mask.data[j] != 0
+                    || d < params.near
+                    || d > params.far
+                    || (d as f64 - d0).abs() > params.max_step
+                {
+                    break;
+                }
+                if (point(depth, camera, j) - seed_p).norm_squared() > r2 {
+                    exit = true;
+                    break;
+                }
+                out.mask.data[j] = 1;
+                queue.push_back(j);
+                break;
             }
-            let j = y as usize * w + x as usize;
-            let d = depth.data[j];
-            if out.mask.data[j] != 0
-                || d == 0
-                || d < params.near
-                || d > params.far
-                || (d as f64 - d0).abs() > params.max_step
-            {
-                continue;
-            }
-            if (point(depth, camera, j) - seed_p).norm_squared() > r2 {
-                exit = true;
-                continue;
-            }
-            out.mask.data[j] = 1;
-            queue.push_back(j);
         }
         if exit {
             exits.push(i);
@@ -252,10 +266,9 @@ pub fn segment_depth_only(
     pts.clear();
     pts.extend(pixels.iter().map(|&i| point(depth, camera, i)));
     if exits.is_empty() {
-        // No exit: the whole arm part is in view and in range. Short: a hand alone; long: the
-        // forearm ends bluntly (a stump) where the hand ends smoothly or in a fist, and the end
-        // whose last 40 mm hold the wider inscribed circle... is ambiguous for fists, so
-        // prefer the end farther from the seed (the nearest point lies on the hand).
+        // No exit: the whole arm part is in view and in range. Short: a hand alone; long: a
+        // forearm stump, at the end of the principal axis farther from the widest inscribed
+        // circle (the palm or the fist is wider than the forearm).
         let n = pts.len() as f64;
         let mean = pts.iter().sum::<Vector3<f64>>() / n;
         let cov = pts
@@ -273,8 +286,10 @@ pub fn segment_depth_only(
                 (a.min(x), b.max(x))
             });
         if t_max - t_min > params.max_hand_length {
-            let t_seed = (seed_p - mean).dot(&axis);
-            let stump_hi = t_seed - t_min < t_max - t_seed;
+            let widest = (0..pixels.len())
+                .max_by(|&a, &b| radius_mm(pixels[a]).total_cmp(&radius_mm(pixels[b])))
+                .unwrap_or(0);
+            let stump_hi = t[widest] - t_min < t_max - t[widest];
             exits.extend(pixels.iter().zip(t.iter()).filter_map(|(&i, &x)| {
                 let stump = if stump_hi {
                     x > t_max - 40.0
@@ -320,28 +335,36 @@ pub fn segment_depth_only(
                 (-1, 1, std::f32::consts::SQRT_2),
                 (1, 1, std::f32::consts::SQRT_2),
             ] {
-                let (x, y) = (u + du, v + dv);
-                if x < 0 || y < 0 || x >= w as i64 || y >= h as i64 {
-                    continue;
-                }
-                let j = y as usize * w + x as usize;
-                if out.mask.data[j] == 0 {
-                    continue;
-                }
-                let g = geo[i] + step * f;
-                if g < geo[j] {
-                    geo[j] = g;
-                    queue.push_back(j);
+                // Across the same holes as the growth.
+                for k in 1..=MAX_HOLE_PX as i64 {
+                    let (x, y) = (u + k * du, v + k * dv);
+                    if x < 0 || y < 0 || x >= w as i64 || y >= h as i64 {
+                        break;
+                    }
+                    let j = y as usize * w + x as usize;
+                    if out.mask.data[j] == 0 {
+                        if depth.data[j] == 0 {
+                            continue;
+                        }
+                        break;
+                    }
+                    let g = geo[i] + step * f * k as f32;
+                    if g < geo[j] {
+                        geo[j] = g;
+                        queue.push_back(j);
+                    }
+                    break;
                 }
             }
         }
         let far_end = pixels
             .iter()
             .map(|&i| geo[i])
+            .filter(|g| g.is_finite())
             .fold(0.0f32, f32::max) as f64;
         let reach = 0.75 * params.max_hand_length;
         palm_k = (0..pixels.len())
-            .filter(|&k| geo[pixels[k]] as f64 >= far_end - reach)
+            .filter(|&k| geo[pixels[k]].is_finite() && geo[pixels[k]] as f64 >= far_end - reach)
             .map(|k| (k, radius_mm(pixels[k])))
             .max_by(|a, b| a.1.total_cmp(&b.1))
             .map_or(0, |(k, r)| {
