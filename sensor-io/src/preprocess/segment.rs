@@ -313,8 +313,11 @@ pub fn segment_depth_only(
             });
     } else {
         // Geodesic distance from the exits (label-correcting BFS, 8-connected).
-        geo.clear();
+        // Only component pixels are read: reset those.
         geo.resize(w * h, f32::INFINITY);
+        for &i in pixels.iter() {
+            geo[i] = f32::INFINITY;
+        }
         queue.clear();
         for &i in exits.iter() {
             if geo[i] != 0.0 {
