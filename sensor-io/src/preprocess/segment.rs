@@ -34,6 +34,10 @@ pub struct SegmentScratch {
     pixels: Vec<usize>,
     pts: Vec<Vector3<f64>>,
     t: Vec<f64>,
+    /// Component pixels where the component leaves the image or the growth volume.
+    exits: Vec<usize>,
+    /// Geodesic distance (mm) inside the component from the exits, per image pixel.
+    geo: Vec<f32>,
 }
 
 /// Parameters of the depth-only segmentation.
@@ -49,12 +53,17 @@ pub struct DepthOnlyParams {
     /// Largest depth step between 4-neighbours of the same component (mm).
     pub max_step: f64,
     /// Distance beyond the palm center at which the forearm is cut, in palm radii (the radius
-    /// of the largest inscribed circle of the silhouette).
+    /// of the largest inscribed circle of the silhouette): the wrist crease lies ≈ 1.3 palm
+    /// radii below the palm center, the wrist of the tracking models reaches ≈ 1 radius further.
     pub cut_palm_radii: f64,
+    /// Bounds (mm) of the forearm cut distance from the palm center, for palms seen edge-on
+    /// (small inscribed circle) or foreshortened forearms (large one).
+    pub cut_range: [f64; 2],
     /// Minimum component size (px) to count as a hand.
     pub min_pixels: usize,
-    /// Longest extent of a hand along its principal axis (mm); a longer component carries a
-    /// forearm, which is cut.
+    /// Longest extent of a hand (mm): the palm center lies within `0.75 ×` this of the hand's
+    /// far end (the fingertips, or the knuckles of a fist); a component without exits (it does
+    /// not leave the image or the growth volume) that is longer than this carries a forearm.
     pub max_hand_length: f64,
 }
 
@@ -63,14 +72,20 @@ impl Default for DepthOnlyParams {
         Self {
             near: 150,
             far: 1500,
-            radius: 220.0,
+            radius: 300.0,
             max_step: 25.0,
-            cut_palm_radii: 1.9,
+            cut_palm_radii: 2.4,
+            cut_range: [80.0, 110.0],
             min_pixels: 60,
             max_hand_length: 210.0,
         }
     }
 }
+
+/// Pixels from the image border within which a component pixel is an exit.
+const BORDER_PX: usize = 2;
+/// Growth steps over runs of fewer than this many invalid (zero) pixels.
+const MAX_HOLE_PX: usize = 3;
 
 fn point(depth: &DepthImage, camera: &Camera, i: usize) -> Vector3<f64> {
     let w = depth.width as usize;
@@ -80,7 +95,6 @@ fn point(depth: &DepthImage, camera: &Camera, i: usize) -> Vector3<f64> {
         depth.data[i] as f64 * camera.depth_unit_mm,
     )
 }
-
 /// The nearest valid pixel with enough similar-depth support around it (rejects isolated
 /// flying pixels and speckle).
 fn find_seed(depth: &DepthImage, near: u16, far: u16) -> Option<usize> {
@@ -124,11 +138,26 @@ fn find_seed(depth: &DepthImage, near: u16, far: u16) -> Option<usize> {
     None
 }
 
-/// Depth-only segmentation: seed at the nearest supported pixel, 4-connected growth across depth
-/// steps below `max_step` inside a sphere of `radius` around the seed, then, when the component
-/// is longer than a hand along its principal axis (an attached forearm), a cut perpendicular to
-/// that axis `cut_palm_radii` palm radii beyond the palm center (the center of the largest
-/// inscribed circle near the hand end). An empty segment (count 0) when nothing hand-sized is in range.
+/// Depth-only segmentation, for sequences without a color image:
+/// 1. seed at the nearest supported pixel, 4-connected growth across depth steps below
+///    `max_step` inside a sphere of `radius` around the seed; component pixels on the image
+///    border or next to a pixel rejected only by the sphere are *exits*, where the arm leaves
+///    the view or the volume (the forearm continues to the elbow and body on real data);
+/// 2. geodesic distances inside the component from the exits (8-connected, in mm at each
+///    pixel's depth), so that the far end of the component is the hand whatever the wrist
+///    bend, rotation or fist; without exits, the end of the principal axis whose last 40 mm
+///    hold the wider inscribed circle is taken as the forearm stump when the component is
+///    longer than `max_hand_length`, and otherwise the whole component is the hand;
+/// 3. palm center: the largest inscribed circle among pixels within `0.75 max_hand_length`
+///    geodesically of the far end (excludes a foreshortened forearm near the exits);
+/// 4. forearm cut: the plane perpendicular to the palm→wrist direction (the palm to the
+///    centroid of the pixels 30–110 mm geodesically closer to the exits) at
+///    `cut_palm_radii` palm radii (within `cut_range`) from the palm center; only pixels
+///    geodesically closer to the exits than the palm center are cut, so fingers folded back
+///    across the plane are kept.
+///
+/// An empty segment (count 0) when nothing hand-sized is in range. Allocation-free once the
+/// buffers of `out` and `scratch` have grown to the image size.
 pub fn segment_depth_only(
     depth: &DepthImage,
     camera: &Camera,
@@ -143,6 +172,8 @@ pub fn segment_depth_only(
         pixels,
         pts,
         t,
+        exits,
+        geo,
     } = scratch;
     let (w, h) = (depth.width as usize, depth.height as usize);
     out.mask.width = depth.width;
@@ -158,133 +189,223 @@ pub fn segment_depth_only(
     let seed_p = point(depth, camera, seed);
     let r2 = params.radius * params.radius;
     queue.clear();
+    exits.clear();
     queue.push_back(seed);
     out.mask.data[seed] = 1;
     while let Some(i) = queue.pop_front() {
         let (u, v) = (i % w, i / w);
         let d0 = depth.data[i] as f64;
+        // Within `BORDER_PX` of the image border: sensors often leave the outermost columns
+        // and rows invalid, so the arm "leaves the image" there too.
+        let mut exit = u < BORDER_PX || v < BORDER_PX || u + BORDER_PX >= w || v + BORDER_PX >= h;
         for (du, dv) in [(-1i64, 0i64), (1, 0), (0, -1), (0, 1)] {
-            let (x, y) = (u as i64 + du, v as i64 + dv);
-            if x < 0 || y < 0 || x >= w as i64 || y >= h as i64 {
-                continue;
+            // Step over up to `MAX_HOLE_PX - 1` invalid pixels (structured-light dropouts on
+            // fingers and at finger–palm boundaries) to the next valid one.
+            for k in 1..=MAX_HOLE_PX as i64 {
+                let (x, y) = (u as i64 + k * du, v as i64 + k * dv);
+                if x < 0 || y < 0 || x >= w as i64 || y >= h as i64 {
+                    exit = true;
+                    break;
+                }
+                let j = y as usize * w + x as usize;
+                let d = depth.data[j];
+                if d == 0 {
+                    continue;
+                }
+                if out.mask.data[j] != 0
+                    || d < params.near
+                    || d > params.far
+                    || (d as f64 - d0).abs() > params.max_step
+                {
+                    break;
+                }
+                if (point(depth, camera, j) - seed_p).norm_squared() > r2 {
+                    exit = true;
+                    break;
+                }
+                out.mask.data[j] = 1;
+                queue.push_back(j);
+                break;
             }
-            let j = y as usize * w + x as usize;
-            let d = depth.data[j];
-            if out.mask.data[j] != 0
-                || d == 0
-                || d < params.near
-                || d > params.far
-                || (d as f64 - d0).abs() > params.max_step
-            {
-                continue;
-            }
-            if (point(depth, camera, j) - seed_p).norm_squared() > r2 {
-                continue;
-            }
-            out.mask.data[j] = 1;
-            queue.push_back(j);
+        }
+        if exit {
+            exits.push(i);
         }
     }
-    let count = out.mask.count();
-    if count < params.min_pixels {
+    pixels.clear();
+    pixels.extend((0..w * h).filter(|&i| out.mask.data[i] != 0));
+    if pixels.len() < params.min_pixels {
         out.mask.data.iter_mut().for_each(|m| *m = 0);
         return;
     }
     // Inscribed radius of every silhouette pixel: distance to the background, computed on the
     // component's bounding box (plus a background border) rather than the whole image.
     let (mut u0, mut v0, mut u1, mut v1) = (w, h, 0, 0);
-    for (i, &m) in out.mask.data.iter().enumerate() {
-        if m != 0 {
-            let (u, v) = (i % w, i / w);
-            u0 = u0.min(u);
-            v0 = v0.min(v);
-            u1 = u1.max(u);
-            v1 = v1.max(v);
-        }
+    for &i in pixels.iter() {
+        let (u, v) = (i % w, i / w);
+        u0 = u0.min(u);
+        v0 = v0.min(v);
+        u1 = u1.max(u);
+        v1 = v1.max(v);
     }
     let (cw, ch) = (u1 - u0 + 3, v1 - v0 + 3);
     inv.width = cw as u32;
     inv.height = ch as u32;
     inv.data.clear();
-    inv.data.resize(cw * ch, 0);
-    for (k, x) in inv.data.iter_mut().enumerate() {
-        let (cu, cv) = (k % cw, k / cw);
-        let inside = cu >= 1
-            && cv >= 1
-            && cu <= cw - 2
-            && cv <= ch - 2
-            && out.mask.data[(cv - 1 + v0) * w + (cu - 1 + u0)] != 0;
-        *x = (!inside) as u8;
+    inv.data.resize(cw * ch, 1);
+    for &i in pixels.iter() {
+        inv.data[(i / w - v0 + 1) * cw + (i % w - u0 + 1)] = 0;
     }
     dt.compute(inv);
     let dt = &*dt;
+    let mm_per_px = |i: usize| depth.data[i] as f64 * camera.depth_unit_mm / camera.fx;
     let radius_mm = |i: usize| {
         let (u, v) = (i % w - u0 + 1, i / w - v0 + 1);
-        (dt.dist2[v * cw + u].sqrt() as f64) * depth.data[i] as f64 * camera.depth_unit_mm
-            / camera.fx
+        (dt.dist2[v * cw + u].sqrt() as f64) * mm_per_px(i)
     };
-    pixels.clear();
-    pixels.extend((0..w * h).filter(|&i| out.mask.data[i] != 0));
     pts.clear();
     pts.extend(pixels.iter().map(|&i| point(depth, camera, i)));
-    let n = pts.len() as f64;
-    let mean = pts.iter().sum::<Vector3<f64>>() / n;
-    let cov = pts
-        .iter()
-        .map(|p| (p - mean) * (p - mean).transpose())
-        .sum::<Matrix3<f64>>()
-        / n;
-    let eig = SymmetricEigen::new(cov);
-    let axis = eig.eigenvectors.column(eig.eigenvalues.imax()).into_owned();
-    t.clear();
-    t.extend(pts.iter().map(|p| (p - mean).dot(&axis)));
-    let (t_min, t_max) = t
-        .iter()
-        .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &x| {
-            (a.min(x), b.max(x))
-        });
-    let widest = |keep: &dyn Fn(f64) -> bool| -> Option<(usize, f64)> {
-        (0..pixels.len())
-            .filter(|&k| keep(t[k]))
+    if exits.is_empty() {
+        // No exit: the whole arm part is in view and in range. Short: a hand alone; long: a
+        // forearm stump, at the end of the principal axis farther from the widest inscribed
+        // circle (the palm or the fist is wider than the forearm).
+        let n = pts.len() as f64;
+        let mean = pts.iter().sum::<Vector3<f64>>() / n;
+        let cov = pts
+            .iter()
+            .map(|p| (p - mean) * (p - mean).transpose())
+            .sum::<Matrix3<f64>>()
+            / n;
+        let eig = SymmetricEigen::new(cov);
+        let axis = eig.eigenvectors.column(eig.eigenvalues.imax()).into_owned();
+        t.clear();
+        t.extend(pts.iter().map(|p| (p - mean).dot(&axis)));
+        let (t_min, t_max) = t
+            .iter()
+            .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &x| {
+                (a.min(x), b.max(x))
+            });
+        if t_max - t_min > params.max_hand_length {
+            let widest = (0..pixels.len())
+                .max_by(|&a, &b| radius_mm(pixels[a]).total_cmp(&radius_mm(pixels[b])))
+                .unwrap_or(0);
+            let stump_hi = t[widest] - t_min < t_max - t[widest];
+            exits.extend(pixels.iter().zip(t.iter()).filter_map(|(&i, &x)| {
+                let stump = if stump_hi {
+                    x > t_max - 40.0
+                } else {
+                    x < t_min + 40.0
+                };
+                stump.then_some(i)
+            }));
+        }
+    }
+    let palm_k;
+    let mut palm_r = 0.0;
+    if exits.is_empty() {
+        // A hand alone: the largest inscribed circle, no cut.
+        palm_k = (0..pixels.len())
             .map(|k| (k, radius_mm(pixels[k])))
             .max_by(|a, b| a.1.total_cmp(&b.1))
-    };
-    let (palm_k, palm_r, forearm_dir) = if t_max - t_min <= params.max_hand_length {
-        let (k, r) = widest(&|_| true).unwrap_or((0, 0.0));
-        (k, r, None)
+            .map_or(0, |(k, r)| {
+                palm_r = r;
+                k
+            });
     } else {
-        // A forearm is attached. Fingers or a fist end the hand smoothly while the forearm is
-        // cut abruptly by the growth volume or the image: the end whose last 40 mm hold the
-        // thinner inscribed circle is the hand.
-        let r_lo = widest(&|x| x < t_min + 40.0).map_or(0.0, |w| w.1);
-        let r_hi = widest(&|x| x > t_max - 40.0).map_or(0.0, |w| w.1);
-        let (hand_lo, dir) = if r_lo <= r_hi {
-            (true, axis)
-        } else {
-            (false, -axis)
-        };
-        let reach = params.max_hand_length * 0.65;
-        let near_hand = move |x: f64| {
-            if hand_lo {
-                x < t_min + reach
-            } else {
-                x > t_max - reach
+        // Geodesic distance from the exits (label-correcting BFS, 8-connected).
+        // Only component pixels are read: reset those.
+        geo.resize(w * h, f32::INFINITY);
+        for &i in pixels.iter() {
+            geo[i] = f32::INFINITY;
+        }
+        queue.clear();
+        for &i in exits.iter() {
+            if geo[i] != 0.0 {
+                geo[i] = 0.0;
+                queue.push_back(i);
             }
-        };
-        let (k, r) = widest(&near_hand).unwrap_or((0, 0.0));
-        (k, r, Some(dir))
-    };
-    let palm = pts[palm_k];
-    if let Some(dir) = forearm_dir {
-        let cut = (params.cut_palm_radii * palm_r).max(40.0);
+        }
+        while let Some(i) = queue.pop_front() {
+            let (u, v) = ((i % w) as i64, (i / w) as i64);
+            let step = mm_per_px(i) as f32;
+            for (du, dv, f) in [
+                (-1i64, 0i64, 1.0f32),
+                (1, 0, 1.0),
+                (0, -1, 1.0),
+                (0, 1, 1.0),
+                (-1, -1, std::f32::consts::SQRT_2),
+                (1, -1, std::f32::consts::SQRT_2),
+                (-1, 1, std::f32::consts::SQRT_2),
+                (1, 1, std::f32::consts::SQRT_2),
+            ] {
+                // Across the same holes as the growth.
+                for k in 1..=MAX_HOLE_PX as i64 {
+                    let (x, y) = (u + k * du, v + k * dv);
+                    if x < 0 || y < 0 || x >= w as i64 || y >= h as i64 {
+                        break;
+                    }
+                    let j = y as usize * w + x as usize;
+                    if out.mask.data[j] == 0 {
+                        if depth.data[j] == 0 {
+                            continue;
+                        }
+                        break;
+                    }
+                    let g = geo[i] + step * f * k as f32;
+                    if g < geo[j] {
+                        geo[j] = g;
+                        queue.push_back(j);
+                    }
+                    break;
+                }
+            }
+        }
+        let far_end = pixels
+            .iter()
+            .map(|&i| geo[i])
+            .filter(|g| g.is_finite())
+            .fold(0.0f32, f32::max) as f64;
+        let reach = 0.75 * params.max_hand_length;
+        palm_k = (0..pixels.len())
+            .filter(|&k| geo[pixels[k]].is_finite() && geo[pixels[k]] as f64 >= far_end - reach)
+            .map(|k| (k, radius_mm(pixels[k])))
+            .max_by(|a, b| a.1.total_cmp(&b.1))
+            .map_or(0, |(k, r)| {
+                palm_r = r;
+                k
+            });
+        let palm = pts[palm_k];
+        let g_palm = geo[pixels[palm_k]] as f64;
+        // Toward the wrist: the pixels 30–110 mm geodesically closer to the exits than the
+        // palm center, or the exits themselves when the palm is that close to them.
+        let (mut sum, mut n) = (Vector3::zeros(), 0usize);
         for (k, &i) in pixels.iter().enumerate() {
-            if (pts[k] - palm).dot(&dir) > cut {
-                out.mask.data[i] = 0;
+            let dg = g_palm - geo[i] as f64;
+            if (30.0..=110.0).contains(&dg) {
+                sum += pts[k];
+                n += 1;
+            }
+        }
+        if n == 0 {
+            for &i in exits.iter() {
+                sum += point(depth, camera, i);
+                n += 1;
+            }
+        }
+        let to_wrist = sum / n as f64 - palm;
+        if to_wrist.norm() > 1e-6 {
+            let dir = to_wrist.normalize();
+            let cut =
+                (params.cut_palm_radii * palm_r).clamp(params.cut_range[0], params.cut_range[1]);
+            for (k, &i) in pixels.iter().enumerate() {
+                if (geo[i] as f64) < g_palm && (pts[k] - palm).dot(&dir) > cut {
+                    out.mask.data[i] = 0;
+                }
             }
         }
     }
     out.count = out.mask.count();
-    out.palm_center = Some(palm);
+    out.palm_center = Some(pts[palm_k]);
 }
 
 /// Parameters of the wristband segmentation (ANCHOR-FACTS §5.6; OpenCV HSV ranges).
