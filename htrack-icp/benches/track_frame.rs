@@ -34,10 +34,9 @@ use hand_model::cylinder::{
     default_right_hand_cylinders, CylinderModel, CylinderProjection, CylinderRaster, View,
 };
 use hand_model::kinematics::Pose;
-use hand_model::render::Intrinsics;
 use hand_model::solver::terms::{JointLimits, JointLimitsParams};
 use hand_model::solver::{callback_fn, EnergyTerm, LmOptions, LmSolver};
-use htrack_icp::synthetic::visible_surface_points;
+use htrack_icp::synthetic::{qvga_camera, upright_pose, visible_surface_points};
 use htrack_icp::terms::{Collision, CollisionParams, E2d, E2dParams, E3d, E3dParams};
 use htrack_icp::{IrlsParams, Tracker, TrackerConfig, TrackingCtx};
 use sensor_io::dt::DistanceTransform;
@@ -45,37 +44,6 @@ use sensor_io::preprocess::PreprocessedFrame;
 use sensor_io::{Camera, Mask};
 
 const POINTS: usize = 2500;
-
-fn intrinsics() -> Intrinsics {
-    Intrinsics {
-        fx: 240.0,
-        fy: 240.0,
-        cx: 160.0,
-        cy: 120.0,
-        width: 320,
-        height: 240,
-    }
-}
-
-/// Upright right hand (fingers toward image −y, palm to the camera) 40 cm away, fingers
-/// slightly bent.
-fn truth_pose(model: &CylinderModel) -> Pose {
-    Pose::from_named(
-        &model.skeleton,
-        [
-            ("global_ty", 40.0),
-            ("global_tz", 400.0),
-            ("global_rz", std::f64::consts::PI - 0.1),
-            ("global_rx", 0.15),
-            ("index_mcp_flex", 0.3),
-            ("middle_pip_flex", 0.4),
-            ("ring_mcp_flex", 0.5),
-            ("pinky_mcp_flex", 0.4),
-            ("thumb_mcp_flex", 0.3),
-        ],
-    )
-    .expect("valid pose")
-}
 
 /// The truth moved a few mm and degrees (the warm start of a frame at 60 Hz).
 fn start_pose(model: &CylinderModel, truth: &Pose) -> Pose {
@@ -99,7 +67,7 @@ fn start_pose(model: &CylinderModel, truth: &Pose) -> Pose {
 /// The preprocessed frame of the model at `truth`: 2500 visible points, camera, silhouette and
 /// its distance transform.
 fn frame_of(model: &CylinderModel, truth: &Pose) -> PreprocessedFrame {
-    let cam = intrinsics();
+    let cam = qvga_camera();
     let posed = model.posed(truth).expect("valid pose");
     let all = visible_surface_points(model, &posed, &cam, 1, 0.5);
     assert!(all.len() >= POINTS, "{} visible points", all.len());
@@ -134,7 +102,7 @@ fn median(v: &mut [f64]) -> f64 {
 
 fn bench_track_frame(c: &mut Criterion) {
     let model = default_right_hand_cylinders();
-    let truth = truth_pose(&model);
+    let truth = upright_pose(&model).expect("valid pose");
     let start = start_pose(&model, &truth);
     let frame = frame_of(&model, &truth);
 
@@ -191,7 +159,7 @@ fn bench_track_frame(c: &mut Criterion) {
         })
     });
 
-    let cam = intrinsics();
+    let cam = qvga_camera();
     let mut raster = CylinderRaster::new();
     group.bench_function("raster_render_full", |b| {
         b.iter(|| raster.render(&model, &posed, &cam).expect("camera"))

@@ -109,3 +109,35 @@ pub fn visible_surface_points(
     }
     out
 }
+
+/// A 320×240 pinhole camera (fx = fy = 240, centered): the sensor of the tests and benchmarks.
+pub fn qvga_camera() -> Intrinsics {
+    Intrinsics {
+        fx: 240.0,
+        fy: 240.0,
+        cx: 160.0,
+        cy: 120.0,
+        width: 320,
+        height: 240,
+    }
+}
+
+/// An upright right hand (fingers toward image −y, palm to the camera) 40 cm from the camera,
+/// fingers slightly bent: the reference pose of the tests and benchmarks. DOFs the model lacks
+/// are an error.
+pub fn upright_pose(model: &CylinderModel) -> hand_model::Result<hand_model::kinematics::Pose> {
+    hand_model::kinematics::Pose::from_named(
+        &model.skeleton,
+        [
+            ("global_ty", 40.0),
+            ("global_tz", 400.0),
+            ("global_rz", std::f64::consts::PI - 0.1),
+            ("global_rx", 0.15),
+            ("index_mcp_flex", 0.3),
+            ("middle_pip_flex", 0.4),
+            ("ring_mcp_flex", 0.5),
+            ("pinky_mcp_flex", 0.4),
+            ("thumb_mcp_flex", 0.3),
+        ],
+    )
+}

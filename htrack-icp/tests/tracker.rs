@@ -3,49 +3,17 @@
 
 use hand_model::cylinder::{default_right_hand_cylinders, CylinderModel};
 use hand_model::kinematics::Pose;
-use hand_model::render::Intrinsics;
-use htrack_icp::synthetic::visible_surface_points;
+use htrack_icp::synthetic::{qvga_camera, upright_pose, visible_surface_points};
 use htrack_icp::{Tracker, TrackerConfig};
 use nalgebra::Vector3;
 use sensor_io::preprocess::PreprocessedFrame;
 use sensor_io::record::HandRecord;
 
-fn intrinsics() -> Intrinsics {
-    Intrinsics {
-        fx: 240.0,
-        fy: 240.0,
-        cx: 160.0,
-        cy: 120.0,
-        width: 320,
-        height: 240,
-    }
-}
-
-/// An upright right hand (fingers toward image −y, palm to the camera) 40 cm away, fingers
-/// slightly bent.
-fn truth_pose(model: &CylinderModel) -> Pose {
-    Pose::from_named(
-        &model.skeleton,
-        [
-            ("global_ty", 40.0),
-            ("global_tz", 400.0),
-            ("global_rz", std::f64::consts::PI - 0.1),
-            ("global_rx", 0.15),
-            ("index_mcp_flex", 0.3),
-            ("middle_pip_flex", 0.4),
-            ("ring_mcp_flex", 0.5),
-            ("pinky_mcp_flex", 0.4),
-            ("thumb_mcp_flex", 0.3),
-        ],
-    )
-    .unwrap()
-}
-
 /// A preprocessed frame holding only the visible points of the posed model.
 fn frame_of(model: &CylinderModel, pose: &Pose) -> PreprocessedFrame {
     let posed = model.posed(pose).unwrap();
     PreprocessedFrame {
-        points: visible_surface_points(model, &posed, &intrinsics(), 2, 0.5),
+        points: visible_surface_points(model, &posed, &qvga_camera(), 2, 0.5),
         ..PreprocessedFrame::default()
     }
 }
@@ -63,7 +31,7 @@ fn mean_keypoint_error(rec: &HandRecord, model: &CylinderModel, truth: &Pose) ->
 #[test]
 fn converges_from_a_perturbed_warm_start() {
     let model = default_right_hand_cylinders();
-    let truth = truth_pose(&model);
+    let truth = upright_pose(&model).expect("valid pose");
     let frame = frame_of(&model, &truth);
     assert!(frame.points.len() > 500, "{} points", frame.points.len());
     let mut tracker = Tracker::new(&model, TrackerConfig::default(), None).unwrap();
@@ -102,7 +70,7 @@ fn converges_from_a_perturbed_warm_start() {
 #[test]
 fn initializes_from_scratch() {
     let model = default_right_hand_cylinders();
-    let truth = truth_pose(&model);
+    let truth = upright_pose(&model).expect("valid pose");
     let frame = frame_of(&model, &truth);
     let mut tracker = Tracker::new(&model, TrackerConfig::default(), None).unwrap();
     let first = tracker.track(&frame, 0, 0.0);
@@ -122,7 +90,7 @@ fn initializes_from_scratch() {
 #[test]
 fn bad_frames_keep_a_valid_pose_and_are_flagged() {
     let model = default_right_hand_cylinders();
-    let truth = truth_pose(&model);
+    let truth = upright_pose(&model).expect("valid pose");
     let good = frame_of(&model, &truth);
     let mut tracker = Tracker::new(&model, TrackerConfig::default(), None).unwrap();
     tracker.set_pose(&truth).unwrap();
