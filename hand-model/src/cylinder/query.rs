@@ -696,6 +696,11 @@ struct PosedSeg {
     reach: f64,
     /// Whether the segment is circular (its closest point is then exact).
     circular: bool,
+    /// For elliptical segments, the bone-frame box holding the segment: `|x| ≤ box_max.x`,
+    /// `box_min.y ≤ y ≤ box_max.y`, `|z| ≤ box_max.z` (a flat palm is much thinner than its
+    /// bounding capsule, whose radius is its half-width).
+    box_min_y: f64,
+    box_max: Vector3<f64>,
 }
 
 /// Slack of the culling tests, far above the rounding of the distances they compare.
@@ -719,16 +724,36 @@ impl PosedSeg {
             inv_len2: if len2 > 0.0 { 1.0 / len2 } else { 0.0 },
             reach: seg.r1.max(seg.r2).max(seg.r1y).max(seg.r2y),
             circular: seg.is_circular(),
+            // Cross-sections have half-axes r(t) ≤ max(r1, r2) along x and ry(t) ≤ max(r1y, r2y)
+            // along z; the end caps reach r1y below the start and r2y beyond the end along y.
+            box_min_y: -seg.r1y,
+            box_max: Vector3::new(
+                seg.r1.max(seg.r2),
+                seg.length + seg.r2y,
+                seg.r1y.max(seg.r2y),
+            ),
         }
     }
 
     /// A lower bound of the distance from `p` to the segment surface when `p` is outside the
     /// bounding capsule (the bound is then positive); ≤ 0 when `p` may be inside the segment.
+    /// Elliptical segments also use the distance to their bone-frame box (the larger of two
+    /// lower bounds is one).
     #[inline]
     fn lower_bound(&self, p: &Vector3<f64>) -> f64 {
         let d = p - self.start;
         let t = (d.dot(&self.axis) * self.inv_len2).clamp(0.0, 1.0);
-        (d - self.axis * t).norm() - self.reach
+        let capsule = (d - self.axis * t).norm() - self.reach;
+        if self.circular {
+            return capsule;
+        }
+        let l = self.frame.rotation.transpose() * d;
+        let out = Vector3::new(
+            (l.x.abs() - self.box_max.x).max(0.0),
+            (self.box_min_y - l.y).max(l.y - self.box_max.y).max(0.0),
+            (l.z.abs() - self.box_max.z).max(0.0),
+        );
+        capsule.max(out.norm())
     }
 }
 
