@@ -1,0 +1,228 @@
+//! One full tracking frame of the Ch. 2 tracker (issue 4 "Speed"): 2500 sensor points, 1 rigid
+//! + 7 full LM iterations, silhouette term included, on one core, warm-started a few mm and
+//! degrees off the truth; and, in the same run, its stages as baselines.
+//!
+//! The frame is built without the `datasets` crate: the default cylinder hand posed upright
+//! 40 cm from a 320×240 camera (fx = fy = 240), its ray-marched visible surface
+//! ([`htrack_icp::synthetic::visible_surface_points`]) subsampled to 2500 points, the
+//! silhouette `S_s` rasterized at the true pose and its distance transform.
+//!
+//! Run with `cargo bench -p htrack-icp --bench track_frame`. Besides criterion's estimates it
+//! prints the medians of the tracker's own per-stage timings (`timing_us` of the record:
+//! `correspondences` = the 8 context refreshes, `solve` = the rest of LM, `track` = the frame).
+//!
+//! # Measured (see the end of this header for the history)
+//! Filled in below by the issue-4 work.
+
+use std::hint::black_box;
+
+use criterion::{criterion_group, criterion_main, Criterion};
+use hand_model::cylinder::{
+    default_right_hand_cylinders, CylinderModel, CylinderProjection, CylinderRaster, View,
+};
+use hand_model::kinematics::Pose;
+use hand_model::render::Intrinsics;
+use hand_model::solver::terms::{JointLimits, JointLimitsParams};
+use hand_model::solver::{callback_fn, EnergyTerm, LmOptions, LmSolver};
+use htrack_icp::synthetic::visible_surface_points;
+use htrack_icp::terms::{Collision, CollisionParams, E2d, E2dParams, E3d, E3dParams};
+use htrack_icp::{IrlsParams, Tracker, TrackerConfig, TrackingCtx};
+use sensor_io::dt::DistanceTransform;
+use sensor_io::preprocess::PreprocessedFrame;
+use sensor_io::{Camera, Mask};
+
+const POINTS: usize = 2500;
+
+fn intrinsics() -> Intrinsics {
+    Intrinsics {
+        fx: 240.0,
+        fy: 240.0,
+        cx: 160.0,
+        cy: 120.0,
+        width: 320,
+        height: 240,
+    }
+}
+
+/// Upright right hand (fingers toward image −y, palm to the camera) 40 cm away, fingers
+/// slightly bent.
+fn truth_pose(model: &CylinderModel) -> Pose {
+    Pose::from_named(
+        &model.skeleton,
+        [
+            ("global_ty", 40.0),
+            ("global_tz", 400.0),
+            ("global_rz", std::f64::consts::PI - 0.1),
+            ("global_rx", 0.15),
+            ("index_mcp_flex", 0.3),
+            ("middle_pip_flex", 0.4),
+            ("ring_mcp_flex", 0.5),
+            ("pinky_mcp_flex", 0.4),
+            ("thumb_mcp_flex", 0.3),
+        ],
+    )
+    .expect("valid pose")
+}
+
+/// The truth moved a few mm and degrees (the warm start of a frame at 60 Hz).
+fn start_pose(model: &CylinderModel, truth: &Pose) -> Pose {
+    let mut p = truth.clone();
+    for (name, d) in [
+        ("global_tx", 3.0),
+        ("global_ty", -2.0),
+        ("global_tz", 4.0),
+        ("global_rx", 0.03),
+        ("global_rz", -0.04),
+        ("index_mcp_flex", 0.08),
+        ("middle_pip_flex", -0.06),
+        ("ring_mcp_flex", 0.07),
+        ("thumb_mcp_flex", -0.05),
+    ] {
+        p.values[model.skeleton.dof_index(name).expect("dof")] += d;
+    }
+    p
+}
+
+/// The preprocessed frame of the model at `truth`: 2500 visible points, camera, silhouette and
+/// its distance transform.
+fn frame_of(model: &CylinderModel, truth: &Pose) -> PreprocessedFrame {
+    let cam = intrinsics();
+    let posed = model.posed(truth).expect("valid pose");
+    let all = visible_surface_points(model, &posed, &cam, 1, 0.5);
+    assert!(all.len() >= POINTS, "{} visible points", all.len());
+    let points = (0..POINTS).map(|i| all[i * all.len() / POINTS]).collect();
+    let mut raster = CylinderRaster::new();
+    raster.render(model, &posed, &cam).expect("valid camera");
+    let mut mask = Mask::zeros(cam.width, cam.height);
+    for &i in raster.hits() {
+        mask.data[i as usize] = 1;
+    }
+    let mut dt = DistanceTransform::default();
+    dt.compute(&mask);
+    let camera = Camera::new("bench", cam.width, cam.height, cam.fx, cam.fy, cam.cx, cam.cy)
+        .expect("valid camera");
+    let mut frame = PreprocessedFrame {
+        camera: Some(camera),
+        dt,
+        points,
+        ..PreprocessedFrame::default()
+    };
+    frame.hand.count = mask.count();
+    frame.hand.mask = mask;
+    frame
+}
+
+fn median(v: &mut [f64]) -> f64 {
+    v.sort_by(f64::total_cmp);
+    v[v.len() / 2]
+}
+
+fn bench_track_frame(c: &mut Criterion) {
+    let model = default_right_hand_cylinders();
+    let truth = truth_pose(&model);
+    let start = start_pose(&model, &truth);
+    let frame = frame_of(&model, &truth);
+
+    // The tracker's own per-stage timings (the `timing_us` keys of the record).
+    let mut tracker = Tracker::new(&model, TrackerConfig::default(), None).expect("tracker");
+    let (mut corr, mut solve, mut total) = (Vec::new(), Vec::new(), Vec::new());
+    for i in 0..200 {
+        tracker.set_pose(&start).expect("pose");
+        let rec = tracker.track(&frame, i, 0.0);
+        assert!(rec.flags.is_empty(), "{:?}", rec.flags);
+        corr.push(rec.timing_us["correspondences"]);
+        solve.push(rec.timing_us["solve"]);
+        total.push(rec.timing_us["track"]);
+    }
+    println!(
+        "timing_us medians over 200 frames: correspondences {:.0}, solve {:.0}, track {:.0}",
+        median(&mut corr),
+        median(&mut solve),
+        median(&mut total)
+    );
+
+    let mut group = c.benchmark_group("track_frame_2500");
+    group.bench_function("frame", |b| {
+        b.iter(|| {
+            tracker.set_pose(&start).expect("pose");
+            black_box(tracker.track(black_box(&frame), 0, 0.0))
+        })
+    });
+
+    // Stage baselines at the warm-start pose.
+    let mut ctx = TrackingCtx::new(&model, View::Orthographic, IrlsParams::default());
+    ctx.set_frame(&frame);
+    group.bench_function("ctx_update_silhouette", |b| {
+        b.iter(|| ctx.update(black_box(&start), false).expect("update"))
+    });
+    ctx.set_silhouette(false);
+    group.bench_function("ctx_update_no_silhouette", |b| {
+        b.iter(|| ctx.update(black_box(&start), false).expect("update"))
+    });
+    ctx.set_silhouette(true);
+
+    let posed = model.posed(&start).expect("valid pose");
+    let mut out: Vec<Option<CylinderProjection>> = vec![None; POINTS];
+    group.bench_function("project_points_front_facing", |b| {
+        b.iter(|| {
+            model
+                .project_points(
+                    &posed,
+                    black_box(&frame.points),
+                    Some(View::Orthographic),
+                    &mut out,
+                )
+                .expect("sizes")
+        })
+    });
+
+    let cam = intrinsics();
+    let mut raster = CylinderRaster::new();
+    group.bench_function("raster_render_full", |b| {
+        b.iter(|| raster.render(&model, &posed, &cam).expect("camera"))
+    });
+    let nearest = &frame.dt.nearest;
+    group.bench_function("raster_render_outside_silhouette", |b| {
+        b.iter(|| {
+            raster
+                .render_where(&model, &posed, &cam, |i| nearest[i] as usize != i)
+                .expect("camera")
+        })
+    });
+
+    // One LM iteration without the context refresh: the terms accumulate + Cholesky.
+    let sk = &model.skeleton;
+    let e3d = E3d::new(E3dParams::default());
+    let e2d = E2d::new(E2dParams::default());
+    let collision = Collision::new(&model, CollisionParams::default());
+    let limits = JointLimits::new(sk, &JointLimitsParams::default());
+    let terms: [&dyn EnergyTerm<TrackingCtx<'_>>; 4] = [&e3d, &e2d, &collision, &limits];
+    let solver = LmSolver::new(
+        sk,
+        0,
+        LmOptions {
+            iterations: 1,
+            rigid_iterations: 0,
+            final_evaluation: false,
+            ..TrackerConfig::default().lm
+        },
+    )
+    .expect("solver");
+    let mut ws = solver.workspace();
+    ctx.update(&start, false).expect("update");
+    let mut pose = start.clone();
+    group.bench_function("lm_iteration_terms_and_cholesky", |b| {
+        b.iter(|| {
+            pose.values.copy_from_slice(&start.values);
+            let mut cb = callback_fn(|_: &Pose, _: &mut TrackingCtx<'_>, _| Ok(()));
+            solver
+                .solve(&mut ws, sk, &mut pose, &mut ctx, &terms, &mut cb)
+                .expect("solve")
+                .iterations
+        })
+    });
+    group.finish();
+}
+
+criterion_group!(benches, bench_track_frame);
+criterion_main!(benches);
