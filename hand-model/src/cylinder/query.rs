@@ -71,6 +71,9 @@ use crate::error::{ModelError, Result};
 use crate::kinematics::PosedSkeleton;
 use crate::math::Rigid3;
 
+/// "No seed" in [`CylinderModel::project_points_seeded`].
+pub const NO_SEED: u16 = u16::MAX;
+
 /// The camera model of the front-facing test (thesis §2.3.1).
 #[derive(Copy, Clone, Debug, PartialEq, Eq)]
 pub enum View {
@@ -163,6 +166,18 @@ impl LocalView {
     }
 }
 
+/// `√(a² + b²)` by one square root (libm's `hypot` costs several times more); falls back to
+/// `hypot` when the squares overflow, so huge finite input keeps its finite result.
+#[inline]
+fn hyp(a: f64, b: f64) -> f64 {
+    let s = a * a + b * b;
+    if s.is_finite() {
+        s.sqrt()
+    } else {
+        a.hypot(b)
+    }
+}
+
 #[inline]
 fn scale_x(v: &Vector3<f64>, k: f64) -> Vector3<f64> {
     Vector3::new(v.x * k, v.y, v.z)
@@ -225,7 +240,7 @@ impl Segment {
     /// parameter maps the cross-section (or the cap) through the point to a circle (a sphere).
     pub fn contains_local_point(&self, p: &Vector3<f64>) -> bool {
         let k = self.ratio(self.axial_t(p.y));
-        let rho = (p.x * k).hypot(p.z);
+        let rho = hyp(p.x * k, p.z);
         profile_inside(rho, p.y, self.r1y, self.r2y, self.length)
     }
 
@@ -287,7 +302,7 @@ impl Segment {
         let t0 = self.axial_t(p.y);
         let k0 = self.ratio(t0);
         let xs = p.x * k0;
-        let rho = xs.hypot(p.z);
+        let rho = hyp(xs, p.z);
         let (ux, uz) = if rho > 0.0 {
             (xs / rho, p.z / rho)
         } else {
@@ -641,7 +656,7 @@ fn profile_closest(rho: f64, y: f64, a: f64, b: f64, l: f64) -> (Foot2, bool) {
         let (d, clamped) = if outside_half {
             ((1.0, 0.0), true)
         } else {
-            let len = rho.hypot(dy);
+            let len = hyp(rho, dy);
             if len > 0.0 {
                 ((rho / len, dy / len), false)
             } else {
@@ -730,6 +745,17 @@ impl PosedSeg {
         let t = (d.dot(&self.axis) * self.inv_len2).clamp(0.0, 1.0);
         (d - self.axis * t).norm() - self.reach
     }
+
+    /// Whether `p` lies outside the bounding capsule by more than `best + margin(best)`, i.e.
+    /// `lower_bound(p) > 0` and `lower_bound(p) > best + margin(best)` (then no surface point of
+    /// the segment is within `best` of `p`), tested on squared lengths without a square root.
+    #[inline]
+    fn beyond(&self, p: &Vector3<f64>, best: f64) -> bool {
+        let d = p - self.start;
+        let t = (d.dot(&self.axis) * self.inv_len2).clamp(0.0, 1.0);
+        let r = self.reach + (best + margin(best)).max(0.0);
+        (d - self.axis * t).norm_squared() > r * r
+    }
 }
 
 impl CylinderModel {
@@ -773,9 +799,10 @@ impl CylinderModel {
     }
 
     /// The model-wide query on precomputed segments: the segment with the smallest signed
-    /// distance wins (ties go to the lowest segment index, as in a plain scan). The segment
-    /// whose bounding capsule is nearest is projected first; any other is skipped when the
-    /// query lies outside its bounding capsule farther than the best distance found, which
+    /// distance wins (ties go to the lowest segment index, as in a plain scan). The `seed`
+    /// segment (temporal coherence: the winner of the previous iteration), or without one the
+    /// segment whose bounding capsule is nearest, is projected first; any other is skipped when
+    /// the query lies outside its bounding capsule farther than the best distance found, which
     /// cannot change the result. Falls back to the plain scan in the (overflow) case where the
     /// winner's world result is not finite.
     fn best_of(
@@ -784,18 +811,24 @@ impl CylinderModel {
         posed: &PosedSkeleton,
         p: &Vector3<f64>,
         view: Option<View>,
+        seed: Option<usize>,
     ) -> Option<CylinderProjection> {
-        let mut first = None;
-        let mut min_lb = f64::INFINITY;
+        // `segs` lists the segments in order, so segment `i` sits at `i` unless a bone is
+        // missing from `posed`.
+        let seeded = seed.filter(|&i| segs.get(i).is_some_and(|s| s.index == i));
+        let mut first = seeded;
         let mut lbs = [0.0; STACK_SEGMENTS];
-        for (j, s) in segs.iter().enumerate() {
-            let lb = s.lower_bound(p);
-            if let Some(slot) = lbs.get_mut(j) {
-                *slot = lb;
-            }
-            if lb < min_lb {
-                min_lb = lb;
-                first = Some(j);
+        if seeded.is_none() {
+            let mut min_lb = f64::INFINITY;
+            for (j, s) in segs.iter().enumerate() {
+                let lb = s.lower_bound(p);
+                if let Some(slot) = lbs.get_mut(j) {
+                    *slot = lb;
+                }
+                if lb < min_lb {
+                    min_lb = lb;
+                    first = Some(j);
+                }
             }
         }
         let mut best: Option<(f64, usize, Local)> = None;
@@ -833,8 +866,11 @@ impl CylinderModel {
                 continue;
             }
             if let Some((bd, _, _)) = best {
-                let lb = lbs.get(j).copied().unwrap_or_else(|| s.lower_bound(p));
-                if lb > 0.0 && lb > bd + margin(bd) {
+                let culled = match lbs.get(j) {
+                    Some(&lb) if seeded.is_none() => lb > 0.0 && lb > bd + margin(bd),
+                    _ => s.beyond(p, bd),
+                };
+                if culled {
                     continue;
                 }
             }
@@ -883,7 +919,7 @@ impl CylinderModel {
         if !p.iter().all(|v| v.is_finite()) || self.segments.is_empty() {
             return None;
         }
-        self.with_posed_segments(posed, |segs| self.best_of(segs, posed, p, None))
+        self.with_posed_segments(posed, |segs| self.best_of(segs, posed, p, None, None))
     }
 
     /// The closest point computed by projecting `p` on every segment, without the culling of
@@ -912,7 +948,7 @@ impl CylinderModel {
         if !p.iter().all(|v| v.is_finite()) || self.segments.is_empty() {
             return None;
         }
-        self.with_posed_segments(posed, |segs| self.best_of(segs, posed, p, Some(view)))
+        self.with_posed_segments(posed, |segs| self.best_of(segs, posed, p, Some(view), None))
     }
 
     /// [`CylinderModel::front_facing_point`] computed on every segment, without culling (same
@@ -941,6 +977,40 @@ impl CylinderModel {
         view: Option<View>,
         out: &mut [Option<CylinderProjection>],
     ) -> Result<usize> {
+        self.project_points_impl(posed, points, view, None, out)
+    }
+
+    /// [`CylinderModel::project_points`] with temporal coherence: `seeds[i]` names the segment
+    /// to project `points[i]` on first (the one it matched at the previous iteration or frame;
+    /// [`NO_SEED`] or an out-of-range index for none), so that the culling bound is tight from
+    /// the start; on return it holds the segment of `out[i]` ([`NO_SEED`] for `None`). The seed
+    /// only orders the search: the result is the same as without it. `seeds` must be as long as
+    /// `points`.
+    pub fn project_points_seeded(
+        &self,
+        posed: &PosedSkeleton,
+        points: &[Vector3<f64>],
+        view: Option<View>,
+        seeds: &mut [u16],
+        out: &mut [Option<CylinderProjection>],
+    ) -> Result<usize> {
+        if seeds.len() != points.len() {
+            return Err(ModelError::InvalidArgument {
+                name: "seeds",
+                reason: format!("{} seeds for {} points", seeds.len(), points.len()),
+            });
+        }
+        self.project_points_impl(posed, points, view, Some(seeds), out)
+    }
+
+    fn project_points_impl(
+        &self,
+        posed: &PosedSkeleton,
+        points: &[Vector3<f64>],
+        view: Option<View>,
+        mut seeds: Option<&mut [u16]>,
+        out: &mut [Option<CylinderProjection>],
+    ) -> Result<usize> {
         if out.len() != points.len() {
             return Err(ModelError::InvalidArgument {
                 name: "out",
@@ -949,16 +1019,27 @@ impl CylinderModel {
         }
         if self.segments.is_empty() {
             out.fill(None);
+            if let Some(s) = seeds {
+                s.fill(NO_SEED);
+            }
             return Ok(0);
         }
         Ok(self.with_posed_segments(posed, |segs| {
             let mut count = 0;
-            for (o, p) in out.iter_mut().zip(points) {
+            for (i, (o, p)) in out.iter_mut().zip(points).enumerate() {
+                let seed = seeds.as_deref_mut().and_then(|s| s.get_mut(i));
                 *o = if p.iter().all(|v| v.is_finite()) {
-                    self.best_of(segs, posed, p, view)
+                    let first = seed.as_deref().map(|&s| usize::from(s));
+                    self.best_of(segs, posed, p, view, first)
                 } else {
                     None
                 };
+                if let Some(s) = seed {
+                    *s = o
+                        .as_ref()
+                        .and_then(|c| u16::try_from(c.segment).ok())
+                        .unwrap_or(NO_SEED);
+                }
                 count += usize::from(o.is_some());
             }
             count
