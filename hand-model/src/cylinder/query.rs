@@ -277,11 +277,15 @@ impl Segment {
                     -(ry * (self.r2 - self.r1) * ux * ux + r * (self.r2y - self.r1y) * uz * uz),
                     l * r * uz,
                 );
-                let circular = normalize_or(
-                    Vector3::new(l * ux, self.r1y - self.r2y, l * uz),
-                    Vector3::new(ux, 0.0, uz),
-                );
-                normalize_or(g, circular)
+                let n = g.norm();
+                if n > 0.0 && n.is_finite() {
+                    g / n
+                } else {
+                    normalize_or(
+                        Vector3::new(l * ux, self.r1y - self.r2y, l * uz),
+                        Vector3::new(ux, 0.0, uz),
+                    )
+                }
             }
         }
     }
@@ -758,6 +762,83 @@ impl PosedSeg {
     }
 }
 
+/// The bounding capsules of up to [`STACK_SEGMENTS`] posed segments in f32 structure-of-arrays
+/// form, relative to `origin` (the first segment's start), for a vectorized candidate test.
+/// Only a conservative pre-filter: a segment it rejects lies farther than the threshold by more
+/// than a slack far above the f32 rounding; survivors are tested again exactly
+/// ([`PosedSeg::beyond`]), so results do not change.
+#[derive(Clone, Debug)]
+struct CapsuleSoa {
+    origin: Vector3<f64>,
+    /// Sum over the axes of the largest |start| and |end| coordinate (relative to `origin`),
+    /// the scale of the rounding.
+    extent: f64,
+    start: [[f32; STACK_SEGMENTS]; 3],
+    axis: [[f32; STACK_SEGMENTS]; 3],
+    inv_len2: [f32; STACK_SEGMENTS],
+    reach: [f32; STACK_SEGMENTS],
+}
+
+impl CapsuleSoa {
+    /// `None` for more than [`STACK_SEGMENTS`] segments or an empty list. Unused slots sit far
+    /// away and are never candidates.
+    fn new(segs: &[PosedSeg]) -> Option<Self> {
+        if segs.len() > STACK_SEGMENTS || segs.is_empty() {
+            return None;
+        }
+        let origin = segs[0].start;
+        let mut soa = CapsuleSoa {
+            origin,
+            extent: 0.0,
+            start: [[1e18; STACK_SEGMENTS]; 3],
+            axis: [[0.0; STACK_SEGMENTS]; 3],
+            inv_len2: [0.0; STACK_SEGMENTS],
+            reach: [0.0; STACK_SEGMENTS],
+        };
+        for (j, sg) in segs.iter().enumerate() {
+            let rel = sg.start - origin;
+            for k in 0..3 {
+                soa.start[k][j] = rel[k] as f32;
+                soa.axis[k][j] = sg.axis[k] as f32;
+            }
+            soa.inv_len2[j] = sg.inv_len2 as f32;
+            soa.reach[j] = sg.reach as f32;
+            soa.extent = soa
+                .extent
+                .max(rel.abs().sum() + (rel + sg.axis).abs().sum() + sg.reach);
+        }
+        soa.extent.is_finite().then_some(soa)
+    }
+
+    /// Bit `j` set unless `p` lies outside capsule `j` by clearly more than
+    /// `best + margin(best)` (so that [`PosedSeg::beyond`] would hold).
+    #[inline]
+    fn candidates(&self, p: &Vector3<f64>, best: f64) -> u32 {
+        let rel = p - self.origin;
+        let base = (best + margin(best)).max(0.0);
+        // f32 rounding of coordinates, products and squares stays below 1e-6 of this scale.
+        let slack = 1e-5 * (1.0 + rel.abs().sum() + self.extent + base);
+        let (px, py, pz) = (rel.x as f32, rel.y as f32, rel.z as f32);
+        let base = (base + slack) as f32;
+        let mut mask = 0u32;
+        for j in 0..STACK_SEGMENTS {
+            let (dx, dy, dz) = (
+                px - self.start[0][j],
+                py - self.start[1][j],
+                pz - self.start[2][j],
+            );
+            let (ax, ay, az) = (self.axis[0][j], self.axis[1][j], self.axis[2][j]);
+            let t = ((dx * ax + dy * ay + dz * az) * self.inv_len2[j]).clamp(0.0, 1.0);
+            let (ex, ey, ez) = (dx - ax * t, dy - ay * t, dz - az * t);
+            let d2 = ex * ex + ey * ey + ez * ez;
+            let thr = self.reach[j] + base;
+            // NaN (overflow) keeps the segment.
+            mask |= u32::from(!(d2 > thr * thr)) << j;
+        }
+        mask
+    }
+}
+
 impl CylinderModel {
     /// Frame of segment `i` in `posed`, when both exist.
     fn frame<'a>(
@@ -812,6 +893,7 @@ impl CylinderModel {
         p: &Vector3<f64>,
         view: Option<View>,
         seed: Option<usize>,
+        soa: Option<&CapsuleSoa>,
     ) -> Option<CylinderProjection> {
         // `segs` lists the segments in order, so segment `i` sits at `i` unless a bone is
         // missing from `posed`.
@@ -861,7 +943,16 @@ impl CylinderModel {
         if let Some(f) = first {
             eval(&segs[f], &mut best);
         }
+        // Seeded, the best distance after the first segment is usually final: pre-filter every
+        // other capsule against it at once.
+        let mask = match (seeded, soa, best) {
+            (Some(_), Some(soa), Some((bd, _, _))) => soa.candidates(p, bd),
+            _ => u32::MAX,
+        };
         for (j, s) in segs.iter().enumerate() {
+            if j < 32 && mask & (1 << j) == 0 {
+                continue;
+            }
             if Some(j) == first {
                 continue;
             }
@@ -919,7 +1010,7 @@ impl CylinderModel {
         if !p.iter().all(|v| v.is_finite()) || self.segments.is_empty() {
             return None;
         }
-        self.with_posed_segments(posed, |segs| self.best_of(segs, posed, p, None, None))
+        self.with_posed_segments(posed, |segs| self.best_of(segs, posed, p, None, None, None))
     }
 
     /// The closest point computed by projecting `p` on every segment, without the culling of
@@ -948,7 +1039,7 @@ impl CylinderModel {
         if !p.iter().all(|v| v.is_finite()) || self.segments.is_empty() {
             return None;
         }
-        self.with_posed_segments(posed, |segs| self.best_of(segs, posed, p, Some(view), None))
+        self.with_posed_segments(posed, |segs| self.best_of(segs, posed, p, Some(view), None, None))
     }
 
     /// [`CylinderModel::front_facing_point`] computed on every segment, without culling (same
@@ -1025,12 +1116,13 @@ impl CylinderModel {
             return Ok(0);
         }
         Ok(self.with_posed_segments(posed, |segs| {
+            let soa = seeds.as_ref().and_then(|_| CapsuleSoa::new(segs));
             let mut count = 0;
             for (i, (o, p)) in out.iter_mut().zip(points).enumerate() {
                 let seed = seeds.as_deref_mut().and_then(|s| s.get_mut(i));
                 *o = if p.iter().all(|v| v.is_finite()) {
                     let first = seed.as_deref().map(|&s| usize::from(s));
-                    self.best_of(segs, posed, p, view, first)
+                    self.best_of(segs, posed, p, view, first, soa.as_ref())
                 } else {
                     None
                 };
