@@ -5,8 +5,8 @@ use std::path::Path;
 
 use hand_model::cylinder::{
     default_right_hand_cylinders, load_htrack_calib, parse_htrack_calib, CylinderModel,
-    CylinderPart, CylinderProjection, Segment, View, NO_SEED, CYLINDER_DOF_NAMES, HTRACK_PALM_OFFSET,
-    HTRACK_THETA_LAYOUT,
+    CylinderPart, CylinderProjection, Segment, View, CYLINDER_DOF_NAMES, HTRACK_PALM_OFFSET,
+    HTRACK_THETA_LAYOUT, NO_SEED,
 };
 use hand_model::keypoints::Handedness;
 use hand_model::kinematics::{DofKind, Pose, PosedSkeleton};

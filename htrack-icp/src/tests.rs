@@ -375,9 +375,7 @@ fn e3d_blocks_equal_row_by_row_assembly() {
     ctx.update(&pose, false).unwrap();
     let n = model.skeleton.num_dofs();
     let mut blocked = NormalEquations::new(n);
-    let stats = E3d::default()
-        .accumulate(&ctx, &mut blocked)
-        .unwrap();
+    let stats = E3d::default().accumulate(&ctx, &mut blocked).unwrap();
     let mut rows = NormalEquations::new(n);
     let (sk, posed) = (ctx.skeleton(), ctx.posed());
     for ((c, &r), &w) in ctx

@@ -832,8 +832,9 @@ impl CapsuleSoa {
             let (ex, ey, ez) = (dx - ax * t, dy - ay * t, dz - az * t);
             let d2 = ex * ex + ey * ey + ez * ez;
             let thr = self.reach[j] + base;
-            // NaN (overflow) keeps the segment.
-            mask |= u32::from(!(d2 > thr * thr)) << j;
+            // Only a clear comparison culls: NaN (overflow) keeps the segment.
+            let far = d2 > thr * thr;
+            mask |= u32::from(!far) << j;
         }
         mask
     }
@@ -1039,7 +1040,9 @@ impl CylinderModel {
         if !p.iter().all(|v| v.is_finite()) || self.segments.is_empty() {
             return None;
         }
-        self.with_posed_segments(posed, |segs| self.best_of(segs, posed, p, Some(view), None, None))
+        self.with_posed_segments(posed, |segs| {
+            self.best_of(segs, posed, p, Some(view), None, None)
+        })
     }
 
     /// [`CylinderModel::front_facing_point`] computed on every segment, without culling (same

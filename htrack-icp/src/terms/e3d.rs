@@ -92,8 +92,8 @@ impl EnergyTerm<TrackingCtx<'_>> for E3d {
         // The points of one bone share its chain: their rows are summed per bone in a packed
         // dense block (no index arithmetic per entry) and added once per bone. Models with more
         // bones or longer chains than the stack blocks hold add row by row.
-        let blocked = bones <= BLOCK_BONES
-            && (0..bones).all(|b| skeleton.chain(b).len() <= BLOCK_CHAIN);
+        let blocked =
+            bones <= BLOCK_BONES && (0..bones).all(|b| skeleton.chain(b).len() <= BLOCK_CHAIN);
         let mut upper = [[0.0f64; BLOCK_PACKED]; BLOCK_BONES];
         let mut rhs = [[0.0f64; BLOCK_CHAIN]; BLOCK_BONES];
         let mut used = [false; BLOCK_BONES];

@@ -108,7 +108,7 @@ impl EnergyTerm<TrackingCtx<'_>> for Wrist {
             });
         };
         let root = frame.transform_point(&local);
-        if !(root.z > MIN_DEPTH) {
+        if root.z.is_nan() || root.z <= MIN_DEPTH {
             return Ok(TermStats::ZERO);
         }
         let r = n.dot(&(camera.project(&root) - c_px));
