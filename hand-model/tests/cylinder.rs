@@ -6,7 +6,7 @@ use std::path::Path;
 use hand_model::cylinder::{
     default_right_hand_cylinders, load_htrack_calib, parse_htrack_calib, CylinderModel,
     CylinderPart, CylinderProjection, Segment, View, CYLINDER_DOF_NAMES, HTRACK_PALM_OFFSET,
-    HTRACK_THETA_LAYOUT,
+    HTRACK_THETA_LAYOUT, NO_SEED,
 };
 use hand_model::keypoints::Handedness;
 use hand_model::kinematics::{DofKind, Pose, PosedSkeleton};
@@ -464,6 +464,26 @@ fn culled_model_queries_equal_the_brute_force_scan() {
                         Some(v) => model.front_facing_point_brute_force(&posed, p, v),
                     };
                     assert_eq!(*o, brute, "{view:?} at {p:?}");
+                }
+                // Seeded (temporal coherence): random, stale, absent and out-of-range seeds
+                // only reorder the search; then the seeds of the previous result.
+                let mut seeds: Vec<u16> = (0..points.len())
+                    .map(|i| match i % 4 {
+                        0 => rng.random_range(0..model.segments.len() as u16),
+                        1 => NO_SEED,
+                        2 => 1000,
+                        _ => (i % model.segments.len()) as u16,
+                    })
+                    .collect();
+                let mut seeded = vec![None; points.len()];
+                for _ in 0..2 {
+                    model
+                        .project_points_seeded(&posed, &points, view, &mut seeds, &mut seeded)
+                        .unwrap();
+                    assert_eq!(seeded, out, "{view:?}");
+                    for (s, o) in seeds.iter().zip(&out) {
+                        assert_eq!(*s, o.map_or(NO_SEED, |o| o.segment as u16));
+                    }
                 }
             }
         }

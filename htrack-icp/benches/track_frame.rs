@@ -1,6 +1,6 @@
-//! One full tracking frame of the Ch. 2 tracker (issue 4 "Speed"): 2500 sensor points, one rigid
-//! and seven full LM iterations, silhouette term included, on one core, warm-started a few mm and
-//! degrees off the truth; and, in the same run, its stages as baselines.
+//! One full tracking frame of the Ch. 2 tracker (issue 4 "Speed"): 2500 sensor points, one
+//! rigid and seven full LM iterations, silhouette term included, on one core, warm-started a few
+//! mm and degrees off the truth; and, in the same run, its stages as baselines.
 //!
 //! The frame is built without the `datasets` crate: the default cylinder hand posed upright
 //! 40 cm from a 320×240 camera (fx = fy = 240), its ray-marched visible surface
@@ -11,21 +11,31 @@
 //! prints the medians of the tracker's own per-stage timings (`timing_us` of the record:
 //! `correspondences` = the 8 context refreshes, `solve` = the rest of LM, `track` = the frame).
 //!
-//! # Measured (2026-11-21, one core of the 2-core dev machine, other jobs idle; criterion medians)
-//! | stage | µs | share of the frame |
-//! |---|---|---|
-//! | full frame (1 rigid + 7 full iterations, E3D + E2D + collision + limits + temporal) | 7465 | 1.00 |
-//! | one context refresh with the silhouette (correspondences + raster) | 754 | 0.10 |
-//! | one context refresh without the silhouette | 640 | 0.09 |
-//! | front-facing correspondences of 2500 points (253 ns/point) | 633 | 0.08 |
-//! | raster of the whole model (baseline) | 641 | 0.09 |
-//! | raster of the pixels outside `S_s` only (what the tracker does) | 120 | 0.02 |
-//! | one LM iteration without the refresh (terms + Cholesky) | 166 | 0.02 |
+//! # Measured
+//! One core of a loaded 2-core build machine (x86-64 baseline target, other builds running),
+//! criterion medians; before = the tree before issue-4 work, after = this commit.
 //!
-//! The tracker's own `timing_us` over 200 frames: correspondences 6047, solve 1249, track 7344.
-//! The frame is 8 × (754 + 166) µs ≈ 7.4 ms: 0.93 ms per iteration on one CPU core, against the
-//! thesis' 1.5 ms per iteration on a GTX 980 (0.62×). The issue's goal of 1.0 ms per *frame* is
-//! not reached: the exact front-facing correspondences alone cost 5 ms of the 8 refreshes.
+//! | stage                                   | before   | after    |
+//! |-----------------------------------------|----------|----------|
+//! | `frame` (full `Tracker::track`)         | 9.06 ms  | 5.75 ms  |
+//! | `timing_us` correspondences / solve     | 6325 / 1290 µs | 4807 / 829 µs |
+//! | `ctx_update_silhouette`                 | 939 µs   | 600 µs   |
+//! | `ctx_update_no_silhouette`              | 712 µs   | 504 µs   |
+//! | `project_points_front_facing` (no seed) | 664 µs   | 595 µs   |
+//! | `raster_render_full`                    | 718 µs   | 637 µs   |
+//! | `raster_render_outside_silhouette`      | 133 µs   | 116 µs   |
+//! | `lm_iteration_terms_and_cholesky`       | 179 µs   | 116 µs   |
+//!
+//! Steps kept, each measured on the frame: seeded correspondence search (each point starts at
+//! the segment it matched at the previous iteration) with square-root-free capsule culling and
+//! one `sqrt` instead of libm `hypot` (9.06 → 6.32 ms); an f32 structure-of-arrays capsule
+//! pre-filter for the seeded search (→ 6.18 ms); E3D rows summed per bone in packed blocks
+//! (→ 5.75 ms). All exact up to rounding (brute-force and row-by-row comparison tests).
+//!
+//! A frame is ~0.72 ms per iteration on one CPU core against the thesis' 1.5 ms per iteration
+//! on a GTX 980, but the frame goal of ≤ 1.0 ms is **not** reached: 8 context refreshes still
+//! cost ~600 µs each (~190 ns per point for ~1.3 segment evaluations, plus ~100 µs silhouette)
+//! and an LM iteration ~116 µs.
 
 use std::hint::black_box;
 

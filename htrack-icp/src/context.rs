@@ -4,7 +4,7 @@
 //! rendered silhouette `S_r` of the model with its per-pixel bone and 3D point (§2.3.1 "2D
 //! correspondences", Eq. 2.3).
 
-use hand_model::cylinder::{CylinderModel, CylinderProjection, CylinderRaster, View};
+use hand_model::cylinder::{CylinderModel, CylinderProjection, CylinderRaster, View, NO_SEED};
 use hand_model::kinematics::{Pose, PosedSkeleton, Skeleton};
 use hand_model::render::Intrinsics;
 use hand_model::solver::{IterInfo, LmCallback, PoseContext, TermError};
@@ -119,6 +119,9 @@ pub struct TrackingCtx<'m> {
     posed: PosedSkeleton,
     points: Vec<Vector3<f64>>,
     correspondences: Vec<Option<CylinderProjection>>,
+    /// Per point the segment of its last correspondence: the first segment searched at the
+    /// next update (temporal coherence; the result does not depend on it).
+    seeds: Vec<u16>,
     residuals: Vec<f64>,
     weights: Vec<f64>,
     reweighted: bool,
@@ -181,6 +184,7 @@ impl<'m> TrackingCtx<'m> {
             pose,
             points: Vec::new(),
             correspondences: Vec::new(),
+            seeds: Vec::new(),
             residuals: Vec::new(),
             weights: Vec::new(),
             reweighted: false,
@@ -252,6 +256,8 @@ impl<'m> TrackingCtx<'m> {
         self.points.extend_from_slice(points);
         self.correspondences.clear();
         self.correspondences.resize(points.len(), None);
+        self.seeds.clear();
+        self.seeds.resize(points.len(), NO_SEED);
         self.residuals.clear();
         self.residuals.resize(points.len(), 0.0);
         self.weights.clear();
@@ -305,10 +311,11 @@ impl<'m> TrackingCtx<'m> {
         }
         if self
             .model
-            .project_points(
+            .project_points_seeded(
                 &self.posed,
                 &self.points,
                 self.front_facing.then_some(self.view),
+                &mut self.seeds,
                 &mut self.correspondences,
             )
             .is_err()

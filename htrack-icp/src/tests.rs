@@ -373,3 +373,44 @@ pub(crate) fn solve_terms<'m>(
         .clone();
     (pose, report)
 }
+
+/// E3D sums the rows of each bone in a packed block before adding it: the system equals the
+/// row-by-row [`NormalEquations::add_row`] assembly up to the order of the additions.
+#[test]
+fn e3d_blocks_equal_row_by_row_assembly() {
+    use hand_model::solver::NormalEquations;
+    let model = default_right_hand_cylinders();
+    let target = target_pose(&model);
+    let points = visible_surface_points(&model, &model.posed(&target).unwrap(), &camera(), 3, 0.5);
+    let pose = perturbed_pose(&model, &target);
+    let mut ctx = TrackingCtx::new(&model, View::Orthographic, IrlsParams::default());
+    ctx.set_points(&points);
+    ctx.update(&pose, false).unwrap();
+    let n = model.skeleton.num_dofs();
+    let mut blocked = NormalEquations::new(n);
+    let stats = E3d::default().accumulate(&ctx, &mut blocked).unwrap();
+    let mut rows = NormalEquations::new(n);
+    let (sk, posed) = (ctx.skeleton(), ctx.posed());
+    for ((c, &r), &w) in ctx
+        .correspondences()
+        .iter()
+        .zip(ctx.residuals())
+        .zip(ctx.weights())
+    {
+        let Some(c) = c else { continue };
+        let cols: Vec<(usize, f64)> = sk
+            .chain(c.bone)
+            .iter()
+            .map(|&d| (d, c.normal.dot(&posed.column(d, &c.point))))
+            .collect();
+        rows.add_row(&cols, r, w).unwrap();
+    }
+    assert!(stats.rows > 100);
+    blocked.symmetrize();
+    rows.symmetrize();
+    let scale = rows.lhs().amax().max(rows.rhs().amax());
+    let diff = (blocked.lhs() - rows.lhs())
+        .amax()
+        .max((blocked.rhs() - rows.rhs()).amax());
+    assert!(diff <= 1e-12 * scale, "{diff} vs {scale}");
+}

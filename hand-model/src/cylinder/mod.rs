@@ -44,5 +44,5 @@ pub mod raycast;
 pub use calib::{load_htrack_calib, parse_htrack_calib, HTRACK_PALM_OFFSET, HTRACK_THETA_LAYOUT};
 pub use default::default_right_hand_cylinders;
 pub use model::{CylinderKeypoint, CylinderModel, Segment, CYLINDER_DOF_NAMES};
-pub use query::{CylinderPart, CylinderProjection, View};
+pub use query::{CylinderPart, CylinderProjection, View, NO_SEED};
 pub use raster::{CylinderRaster, RasterHit, NO_SEGMENT};

@@ -71,6 +71,9 @@ use crate::error::{ModelError, Result};
 use crate::kinematics::PosedSkeleton;
 use crate::math::Rigid3;
 
+/// "No seed" in [`CylinderModel::project_points_seeded`].
+pub const NO_SEED: u16 = u16::MAX;
+
 /// The camera model of the front-facing test (thesis §2.3.1).
 #[derive(Copy, Clone, Debug, PartialEq, Eq)]
 pub enum View {
@@ -163,6 +166,18 @@ impl LocalView {
     }
 }
 
+/// `√(a² + b²)` by one square root (libm's `hypot` costs several times more); falls back to
+/// `hypot` when the squares overflow, so huge finite input keeps its finite result.
+#[inline]
+fn hyp(a: f64, b: f64) -> f64 {
+    let s = a * a + b * b;
+    if s.is_finite() {
+        s.sqrt()
+    } else {
+        a.hypot(b)
+    }
+}
+
 #[inline]
 fn scale_x(v: &Vector3<f64>, k: f64) -> Vector3<f64> {
     Vector3::new(v.x * k, v.y, v.z)
@@ -225,7 +240,7 @@ impl Segment {
     /// parameter maps the cross-section (or the cap) through the point to a circle (a sphere).
     pub fn contains_local_point(&self, p: &Vector3<f64>) -> bool {
         let k = self.ratio(self.axial_t(p.y));
-        let rho = (p.x * k).hypot(p.z);
+        let rho = hyp(p.x * k, p.z);
         profile_inside(rho, p.y, self.r1y, self.r2y, self.length)
     }
 
@@ -262,11 +277,15 @@ impl Segment {
                     -(ry * (self.r2 - self.r1) * ux * ux + r * (self.r2y - self.r1y) * uz * uz),
                     l * r * uz,
                 );
-                let circular = normalize_or(
-                    Vector3::new(l * ux, self.r1y - self.r2y, l * uz),
-                    Vector3::new(ux, 0.0, uz),
-                );
-                normalize_or(g, circular)
+                let n = g.norm();
+                if n > 0.0 && n.is_finite() {
+                    g / n
+                } else {
+                    normalize_or(
+                        Vector3::new(l * ux, self.r1y - self.r2y, l * uz),
+                        Vector3::new(ux, 0.0, uz),
+                    )
+                }
             }
         }
     }
@@ -287,7 +306,7 @@ impl Segment {
         let t0 = self.axial_t(p.y);
         let k0 = self.ratio(t0);
         let xs = p.x * k0;
-        let rho = xs.hypot(p.z);
+        let rho = hyp(xs, p.z);
         let (ux, uz) = if rho > 0.0 {
             (xs / rho, p.z / rho)
         } else {
@@ -641,7 +660,7 @@ fn profile_closest(rho: f64, y: f64, a: f64, b: f64, l: f64) -> (Foot2, bool) {
         let (d, clamped) = if outside_half {
             ((1.0, 0.0), true)
         } else {
-            let len = rho.hypot(dy);
+            let len = hyp(rho, dy);
             if len > 0.0 {
                 ((rho / len, dy / len), false)
             } else {
@@ -755,6 +774,95 @@ impl PosedSeg {
         );
         capsule.max(out.norm())
     }
+
+    /// Whether `p` lies outside the bounding capsule by more than `best + margin(best)`, i.e.
+    /// `lower_bound(p) > 0` and `lower_bound(p) > best + margin(best)` (then no surface point of
+    /// the segment is within `best` of `p`), tested on squared lengths without a square root.
+    #[inline]
+    fn beyond(&self, p: &Vector3<f64>, best: f64) -> bool {
+        let d = p - self.start;
+        let t = (d.dot(&self.axis) * self.inv_len2).clamp(0.0, 1.0);
+        let r = self.reach + (best + margin(best)).max(0.0);
+        (d - self.axis * t).norm_squared() > r * r
+    }
+}
+
+/// The bounding capsules of up to [`STACK_SEGMENTS`] posed segments in f32 structure-of-arrays
+/// form, relative to `origin` (the first segment's start), for a vectorized candidate test.
+/// Only a conservative pre-filter: a segment it rejects lies farther than the threshold by more
+/// than a slack far above the f32 rounding; survivors are tested again exactly
+/// ([`PosedSeg::beyond`]), so results do not change.
+#[derive(Clone, Debug)]
+struct CapsuleSoa {
+    origin: Vector3<f64>,
+    /// Sum over the axes of the largest |start| and |end| coordinate (relative to `origin`),
+    /// the scale of the rounding.
+    extent: f64,
+    start: [[f32; STACK_SEGMENTS]; 3],
+    axis: [[f32; STACK_SEGMENTS]; 3],
+    inv_len2: [f32; STACK_SEGMENTS],
+    reach: [f32; STACK_SEGMENTS],
+}
+
+impl CapsuleSoa {
+    /// `None` for more than [`STACK_SEGMENTS`] segments or an empty list. Unused slots sit far
+    /// away and are never candidates.
+    fn new(segs: &[PosedSeg]) -> Option<Self> {
+        if segs.len() > STACK_SEGMENTS || segs.is_empty() {
+            return None;
+        }
+        let origin = segs[0].start;
+        let mut soa = CapsuleSoa {
+            origin,
+            extent: 0.0,
+            start: [[1e18; STACK_SEGMENTS]; 3],
+            axis: [[0.0; STACK_SEGMENTS]; 3],
+            inv_len2: [0.0; STACK_SEGMENTS],
+            reach: [0.0; STACK_SEGMENTS],
+        };
+        for (j, sg) in segs.iter().enumerate() {
+            let rel = sg.start - origin;
+            for k in 0..3 {
+                soa.start[k][j] = rel[k] as f32;
+                soa.axis[k][j] = sg.axis[k] as f32;
+            }
+            soa.inv_len2[j] = sg.inv_len2 as f32;
+            soa.reach[j] = sg.reach as f32;
+            soa.extent = soa
+                .extent
+                .max(rel.abs().sum() + (rel + sg.axis).abs().sum() + sg.reach);
+        }
+        soa.extent.is_finite().then_some(soa)
+    }
+
+    /// Bit `j` set unless `p` lies outside capsule `j` by clearly more than
+    /// `best + margin(best)` (so that [`PosedSeg::beyond`] would hold).
+    #[inline]
+    fn candidates(&self, p: &Vector3<f64>, best: f64) -> u32 {
+        let rel = p - self.origin;
+        let base = (best + margin(best)).max(0.0);
+        // f32 rounding of coordinates, products and squares stays below 1e-6 of this scale.
+        let slack = 1e-5 * (1.0 + rel.abs().sum() + self.extent + base);
+        let (px, py, pz) = (rel.x as f32, rel.y as f32, rel.z as f32);
+        let base = (base + slack) as f32;
+        let mut mask = 0u32;
+        for j in 0..STACK_SEGMENTS {
+            let (dx, dy, dz) = (
+                px - self.start[0][j],
+                py - self.start[1][j],
+                pz - self.start[2][j],
+            );
+            let (ax, ay, az) = (self.axis[0][j], self.axis[1][j], self.axis[2][j]);
+            let t = ((dx * ax + dy * ay + dz * az) * self.inv_len2[j]).clamp(0.0, 1.0);
+            let (ex, ey, ez) = (dx - ax * t, dy - ay * t, dz - az * t);
+            let d2 = ex * ex + ey * ey + ez * ez;
+            let thr = self.reach[j] + base;
+            // Only a clear comparison culls: NaN (overflow) keeps the segment.
+            let far = d2 > thr * thr;
+            mask |= u32::from(!far) << j;
+        }
+        mask
+    }
 }
 
 impl CylinderModel {
@@ -798,9 +906,10 @@ impl CylinderModel {
     }
 
     /// The model-wide query on precomputed segments: the segment with the smallest signed
-    /// distance wins (ties go to the lowest segment index, as in a plain scan). The segment
-    /// whose bounding capsule is nearest is projected first; any other is skipped when the
-    /// query lies outside its bounding capsule farther than the best distance found, which
+    /// distance wins (ties go to the lowest segment index, as in a plain scan). The `seed`
+    /// segment (temporal coherence: the winner of the previous iteration), or without one the
+    /// segment whose bounding capsule is nearest, is projected first; any other is skipped when
+    /// the query lies outside its bounding capsule farther than the best distance found, which
     /// cannot change the result. Falls back to the plain scan in the (overflow) case where the
     /// winner's world result is not finite.
     fn best_of(
@@ -809,18 +918,25 @@ impl CylinderModel {
         posed: &PosedSkeleton,
         p: &Vector3<f64>,
         view: Option<View>,
+        seed: Option<usize>,
+        soa: Option<&CapsuleSoa>,
     ) -> Option<CylinderProjection> {
-        let mut first = None;
-        let mut min_lb = f64::INFINITY;
+        // `segs` lists the segments in order, so segment `i` sits at `i` unless a bone is
+        // missing from `posed`.
+        let seeded = seed.filter(|&i| segs.get(i).is_some_and(|s| s.index == i));
+        let mut first = seeded;
         let mut lbs = [0.0; STACK_SEGMENTS];
-        for (j, s) in segs.iter().enumerate() {
-            let lb = s.lower_bound(p);
-            if let Some(slot) = lbs.get_mut(j) {
-                *slot = lb;
-            }
-            if lb < min_lb {
-                min_lb = lb;
-                first = Some(j);
+        if seeded.is_none() {
+            let mut min_lb = f64::INFINITY;
+            for (j, s) in segs.iter().enumerate() {
+                let lb = s.lower_bound(p);
+                if let Some(slot) = lbs.get_mut(j) {
+                    *slot = lb;
+                }
+                if lb < min_lb {
+                    min_lb = lb;
+                    first = Some(j);
+                }
             }
         }
         let mut best: Option<(f64, usize, Local)> = None;
@@ -853,13 +969,25 @@ impl CylinderModel {
         if let Some(f) = first {
             eval(&segs[f], &mut best);
         }
+        // Seeded, the best distance after the first segment is usually final: pre-filter every
+        // other capsule against it at once.
+        let mask = match (seeded, soa, best) {
+            (Some(_), Some(soa), Some((bd, _, _))) => soa.candidates(p, bd),
+            _ => u32::MAX,
+        };
         for (j, s) in segs.iter().enumerate() {
+            if j < 32 && mask & (1 << j) == 0 {
+                continue;
+            }
             if Some(j) == first {
                 continue;
             }
             if let Some((bd, _, _)) = best {
-                let lb = lbs.get(j).copied().unwrap_or_else(|| s.lower_bound(p));
-                if lb > 0.0 && lb > bd + margin(bd) {
+                let culled = match lbs.get(j) {
+                    Some(&lb) if seeded.is_none() => lb > 0.0 && lb > bd + margin(bd),
+                    _ => s.beyond(p, bd),
+                };
+                if culled {
                     continue;
                 }
             }
@@ -908,7 +1036,7 @@ impl CylinderModel {
         if !p.iter().all(|v| v.is_finite()) || self.segments.is_empty() {
             return None;
         }
-        self.with_posed_segments(posed, |segs| self.best_of(segs, posed, p, None))
+        self.with_posed_segments(posed, |segs| self.best_of(segs, posed, p, None, None, None))
     }
 
     /// The closest point computed by projecting `p` on every segment, without the culling of
@@ -937,7 +1065,9 @@ impl CylinderModel {
         if !p.iter().all(|v| v.is_finite()) || self.segments.is_empty() {
             return None;
         }
-        self.with_posed_segments(posed, |segs| self.best_of(segs, posed, p, Some(view)))
+        self.with_posed_segments(posed, |segs| {
+            self.best_of(segs, posed, p, Some(view), None, None)
+        })
     }
 
     /// [`CylinderModel::front_facing_point`] computed on every segment, without culling (same
@@ -966,6 +1096,40 @@ impl CylinderModel {
         view: Option<View>,
         out: &mut [Option<CylinderProjection>],
     ) -> Result<usize> {
+        self.project_points_impl(posed, points, view, None, out)
+    }
+
+    /// [`CylinderModel::project_points`] with temporal coherence: `seeds[i]` names the segment
+    /// to project `points[i]` on first (the one it matched at the previous iteration or frame;
+    /// [`NO_SEED`] or an out-of-range index for none), so that the culling bound is tight from
+    /// the start; on return it holds the segment of `out[i]` ([`NO_SEED`] for `None`). The seed
+    /// only orders the search: the result is the same as without it. `seeds` must be as long as
+    /// `points`.
+    pub fn project_points_seeded(
+        &self,
+        posed: &PosedSkeleton,
+        points: &[Vector3<f64>],
+        view: Option<View>,
+        seeds: &mut [u16],
+        out: &mut [Option<CylinderProjection>],
+    ) -> Result<usize> {
+        if seeds.len() != points.len() {
+            return Err(ModelError::InvalidArgument {
+                name: "seeds",
+                reason: format!("{} seeds for {} points", seeds.len(), points.len()),
+            });
+        }
+        self.project_points_impl(posed, points, view, Some(seeds), out)
+    }
+
+    fn project_points_impl(
+        &self,
+        posed: &PosedSkeleton,
+        points: &[Vector3<f64>],
+        view: Option<View>,
+        mut seeds: Option<&mut [u16]>,
+        out: &mut [Option<CylinderProjection>],
+    ) -> Result<usize> {
         if out.len() != points.len() {
             return Err(ModelError::InvalidArgument {
                 name: "out",
@@ -974,16 +1138,28 @@ impl CylinderModel {
         }
         if self.segments.is_empty() {
             out.fill(None);
+            if let Some(s) = seeds {
+                s.fill(NO_SEED);
+            }
             return Ok(0);
         }
         Ok(self.with_posed_segments(posed, |segs| {
+            let soa = seeds.as_ref().and_then(|_| CapsuleSoa::new(segs));
             let mut count = 0;
-            for (o, p) in out.iter_mut().zip(points) {
+            for (i, (o, p)) in out.iter_mut().zip(points).enumerate() {
+                let seed = seeds.as_deref_mut().and_then(|s| s.get_mut(i));
                 *o = if p.iter().all(|v| v.is_finite()) {
-                    self.best_of(segs, posed, p, view)
+                    let first = seed.as_deref().map(|&s| usize::from(s));
+                    self.best_of(segs, posed, p, view, first, soa.as_ref())
                 } else {
                     None
                 };
+                if let Some(s) = seed {
+                    *s = o
+                        .as_ref()
+                        .and_then(|c| u16::try_from(c.segment).ok())
+                        .unwrap_or(NO_SEED);
+                }
                 count += usize::from(o.is_some());
             }
             count

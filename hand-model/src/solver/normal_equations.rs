@@ -141,6 +141,40 @@ impl NormalEquations {
         })
     }
 
+    /// A block accumulated elsewhere over the unknowns `cols` (k of them): `A[cols[a]][cols[b]]
+    /// += upper[·]` for `a ≤ b`, the packed upper triangle row by row (`upper` holds
+    /// `k(k+1)/2` values: row `a` is `A[a][a..k]`), and `b[cols[a]] += rhs[a]`. A term that sums
+    /// many rows with the same sparsity (the points of one bone) adds them here once; the
+    /// result equals [`NormalEquations::add_row`] per row up to the order of the additions.
+    /// Repeated indices in `cols` are summed (an off-diagonal entry of a repeated index adds to
+    /// the diagonal twice, as in `add_row`).
+    pub fn add_packed_block(
+        &mut self,
+        cols: &[usize],
+        upper: &[f64],
+        rhs: &[f64],
+    ) -> Result<(), TermError> {
+        let k = cols.len();
+        if upper.len() < k * (k + 1) / 2 || rhs.len() < k {
+            return Err(TermError::Failed("packed block shorter than its columns"));
+        }
+        for &i in cols {
+            self.check(i)?;
+        }
+        self.symmetric = false;
+        let mut off = 0;
+        for (a, &ia) in cols.iter().enumerate() {
+            self.rhs[ia] += rhs[a];
+            self.lhs[(ia, ia)] += upper[off];
+            for (&ib, &v) in cols[a + 1..].iter().zip(&upper[off + 1..off + k - a]) {
+                let v = if ia == ib { 2.0 * v } else { v };
+                self.add_upper(ia, ib, v);
+            }
+            off += k - a;
+        }
+        Ok(())
+    }
+
     /// One scalar residual row whose Jacobian is dense over the contiguous unknowns
     /// `offset .. offset + row.len()`: the rank-one update `A += ω jjᵀ`, `b −= ω j r`.
     pub fn add_rank1(
