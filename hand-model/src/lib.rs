@@ -17,7 +17,7 @@
 //! - [`solver`]: normal equations, the one trait of every energy term, Levenberg–Marquardt
 //!   (Eq. 2.11) with a rigid-first schedule, and the shared prior terms (joint limits, damping,
 //!   temporal, projective PCA pose prior);
-//! - [`testing`]: finite-difference helpers for Jacobian tests.
+//! - [`testing`]: finite-difference helpers for Jacobian tests and a shared cylinder test pose.
 //!
 //! Units are millimetres and radians; frames follow `DESIGN.md` (model frame: origin at the back
 //! of the palm near the wrist, +y toward the fingertips, palm facing −z; camera frame: OpenCV).

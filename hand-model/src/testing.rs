@@ -13,3 +13,26 @@ pub fn central_difference(
 ) -> nalgebra::Vector3<f64> {
     (f(h) - f(-h)) / (2.0 * h)
 }
+
+/// The cylinder-model test pose shared by the tests of `hand-model` and `htrack-icp`: the hand
+/// 40 cm in front of the camera, palm toward it, turned a little, a few fingers bent.
+pub fn cylinder_test_pose(model: &crate::cylinder::CylinderModel) -> crate::kinematics::Pose {
+    crate::kinematics::Pose::from_named(
+        &model.skeleton,
+        [
+            ("global_tx", 0.0),
+            ("global_ty", -80.0),
+            ("global_tz", 400.0),
+            ("global_rx", 0.2),
+            ("global_ry", -0.15),
+            ("global_rz", 0.1),
+            ("thumb_cmc_flex", 0.2),
+            ("index_mcp_flex", 0.3),
+            ("middle_pip_flex", 0.4),
+            ("ring_mcp_flex", 0.5),
+            ("pinky_mcp_flex", 0.3),
+            ("pinky_pip_flex", 0.3),
+        ],
+    )
+    .expect("every cylinder model has the 26 named DOFs")
+}

@@ -24,27 +24,9 @@ pub(crate) fn camera() -> Intrinsics {
     }
 }
 
-/// The pose that produces the synthetic data: hand 40 cm in front of the camera, palm toward
-/// it, a few fingers bent.
+/// The pose that produces the synthetic data ([`hand_model::testing::cylinder_test_pose`]).
 pub(crate) fn target_pose(model: &CylinderModel) -> Pose {
-    Pose::from_named(
-        &model.skeleton,
-        [
-            ("global_tx", 0.0),
-            ("global_ty", -80.0),
-            ("global_tz", 400.0),
-            ("global_rx", 0.2),
-            ("global_ry", -0.15),
-            ("global_rz", 0.1),
-            ("thumb_cmc_flex", 0.2),
-            ("index_mcp_flex", 0.3),
-            ("middle_pip_flex", 0.4),
-            ("ring_mcp_flex", 0.5),
-            ("pinky_mcp_flex", 0.3),
-            ("pinky_pip_flex", 0.3),
-        ],
-    )
-    .unwrap()
+    hand_model::testing::cylinder_test_pose(model)
 }
 
 /// The target perturbed: 15 mm, ~0.1 rad and 0.15–0.25 rad per finger joint.

@@ -32,7 +32,7 @@ use sensor_io::preprocess::PreprocessedFrame;
 use sensor_io::record::HandRecord;
 use serde::{Deserialize, Serialize};
 
-use crate::context::{IrlsParams, TrackingCtx};
+use crate::context::{CorrespondenceCallback, IrlsParams, TrackingCtx};
 use crate::terms::{
     Collision, CollisionParams, E2d, E2dParams, E3d, E3dParams, Wrist, WristParams,
 };
@@ -175,8 +175,8 @@ pub struct FrameStats {
     pub failed: bool,
 }
 
-/// Times the correspondence stage (re-pose, front-facing correspondences, IRLS weights) inside
-/// the solver's per-iteration callback.
+/// [`CorrespondenceCallback`], timed: the correspondence stage (re-pose, front-facing
+/// correspondences, IRLS weights, silhouette raster) inside the solver's per-iteration callback.
 struct TimedCallback {
     correspondences_us: f64,
 }
@@ -189,7 +189,7 @@ impl LmCallback<TrackingCtx<'_>> for TimedCallback {
         info: IterInfo,
     ) -> Result<(), TermError> {
         let t = Instant::now();
-        let r = ctx.update(pose, info.rigid_only);
+        let r = CorrespondenceCallback.prepare(pose, ctx, info);
         self.correspondences_us += t.elapsed().as_secs_f64() * 1e6;
         r
     }
@@ -393,7 +393,7 @@ impl<'m> Tracker<'m> {
                     rec.flags.push("solver_failed".into());
                 }
             }
-            let stats = self.frame_stats();
+            let mut stats = self.frame_stats();
             if stats.failed {
                 self.failed_run += 1;
                 if self.failed_run >= self.config.loss.window {
@@ -402,11 +402,11 @@ impl<'m> Tracker<'m> {
                         rec.flags.push("reinitialized".into());
                     }
                     self.failed_run = 0;
+                    stats = self.frame_stats();
                 }
             } else {
                 self.failed_run = 0;
             }
-            let stats = self.frame_stats();
             if stats.failed {
                 rec.flags.push("lost".into());
             }

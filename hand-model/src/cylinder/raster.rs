@@ -316,27 +316,9 @@ mod tests {
         }
     }
 
-    /// Hand 40 cm in front of the camera, palm toward it, a few fingers bent (the pose of the
-    /// htrack-icp tests).
+    /// The pose of the htrack-icp tests.
     fn pose(model: &CylinderModel) -> Pose {
-        Pose::from_named(
-            &model.skeleton,
-            [
-                ("global_tx", 0.0),
-                ("global_ty", -80.0),
-                ("global_tz", 400.0),
-                ("global_rx", 0.2),
-                ("global_ry", -0.15),
-                ("global_rz", 0.1),
-                ("thumb_cmc_flex", 0.2),
-                ("index_mcp_flex", 0.3),
-                ("middle_pip_flex", 0.4),
-                ("ring_mcp_flex", 0.5),
-                ("pinky_mcp_flex", 0.3),
-                ("pinky_pip_flex", 0.3),
-            ],
-        )
-        .unwrap()
+        crate::testing::cylinder_test_pose(model)
     }
 
     fn inside(model: &CylinderModel, posed: &PosedSkeleton, p: &Vector3<f64>) -> bool {
