@@ -97,6 +97,17 @@ impl SyntheticRun {
         n as f64 / self.records.len() as f64
     }
 
+    /// Fraction of all frames whose maximum keypoint error is below `epsilon` (mm); a frame
+    /// without an error (no keypoints) counts as above.
+    pub fn fraction_max_under(&self, epsilon: f64) -> f64 {
+        let maxes: Vec<f64> = self
+            .errors
+            .iter()
+            .map(|e| e.map_or(f64::INFINITY, |e| e.max))
+            .collect();
+        crate::markers::fraction_under(&maxes, epsilon)
+    }
+
     /// Per frame the mean keypoint error (NaN where there is none).
     pub fn mean_errors(&self) -> Vec<f64> {
         self.errors

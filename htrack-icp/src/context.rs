@@ -7,96 +7,10 @@
 use hand_model::cylinder::{CylinderModel, CylinderProjection, CylinderRaster, View, NO_SEED};
 use hand_model::kinematics::{Pose, PosedSkeleton, Skeleton};
 use hand_model::render::Intrinsics;
-use hand_model::solver::{IterInfo, LmCallback, PoseContext, TermError};
+use hand_model::solver::{IrlsParams, IterInfo, LmCallback, PoseContext, TermError};
 use nalgebra::Vector3;
-use sensor_io::dt::NO_PIXEL;
 use sensor_io::preprocess::PreprocessedFrame;
-use sensor_io::Camera;
-use serde::{Deserialize, Serialize};
-
-/// How the ℓ1 norm of Eq. 2.2 is approximated by iteratively re-weighted least squares
-/// (thesis §2.7.4: `ω_re = 1/‖d‖`; htrack reweights with `3.5/√(d + 1e−3)` baked into both `J`
-/// and `e`, an effective weight `3.5²/d`, ANCHOR-FACTS §5.3).
-///
-/// With the point-to-plane residual `r = nᵀ(y − x)` the term minimizes the Huber-smoothed ℓ1
-/// energy `2g·ρ_ε(r)`, `ρ_ε(r) = |r|` for `|r| ≥ ε`, `r²/(2ε) + ε/2` below, whose IRLS weight is
-/// `w = (2g·ρ_ε)'(r)/(2r) = g / max(|r|, ε)`. With that weight the quadratic surrogate
-/// `w·(r + Jδ)² + const` has exactly the value and the gradient of `2g·ρ_ε` at the linearization
-/// point, so the linearization is finite-difference checkable and the reported energy is
-/// `2g Σ‖x − y‖` (Eq. 2.2 scaled) whenever `n ∥ x − y` (every closest-point correspondence).
-///
-/// The gain `g` sets how strongly the reweighted data term pulls against the damping λ = 100
-/// and the priors. The default `g = 3.5² = 12.25` is htrack's effective weight (the thesis'
-/// `ω_re = 1/‖d‖` is `g = 1`: with it the data term is ~12× weaker than in the code whose
-/// numbers the thesis reports, and a perturbed pose converges several times slower against
-/// λ = 100 — measured in `tests/tracker.rs`). On non-reweighted iterations the weight is 1,
-/// as in htrack. `ε` avoids the division by zero (htrack skips reweighting below
-/// `d = 1e−3` mm).
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-#[serde(default, deny_unknown_fields)]
-pub struct IrlsParams {
-    /// Reweight at all (false: plain point-to-plane least squares `Σ r²` on every iteration).
-    pub reweight: bool,
-    /// Also reweight on rigid-only iterations (htrack `fit3D_reweight_rigid`, off: "allows fast
-    /// rigid motion", ANCHOR-FACTS §5.3).
-    pub reweight_rigid: bool,
-    /// Huber threshold ε (mm) below which the ℓ1 norm is replaced by a quadratic.
-    pub epsilon: f64,
-    /// Gain `g` of the reweighted term (htrack 12.25; thesis formula 1).
-    pub gain: f64,
-}
-
-impl Default for IrlsParams {
-    fn default() -> Self {
-        Self {
-            reweight: true,
-            reweight_rigid: false,
-            epsilon: 1e-3,
-            gain: 12.25,
-        }
-    }
-}
-
-impl IrlsParams {
-    /// The penalty `2g·ρ_ε(r)` whose IRLS weight is [`IrlsParams::weight`].
-    #[inline]
-    pub fn penalty(&self, r: f64) -> f64 {
-        let a = r.abs();
-        let eps = self.eps();
-        let rho = if a >= eps {
-            a
-        } else {
-            r * r / (2.0 * eps) + eps / 2.0
-        };
-        2.0 * self.gain() * rho
-    }
-
-    /// The IRLS weight `w = g / max(|r|, ε)` of [`IrlsParams::penalty`].
-    #[inline]
-    pub fn weight(&self, r: f64) -> f64 {
-        self.gain() / r.abs().max(self.eps())
-    }
-
-    /// ε, made positive and finite so that no weight divides by zero.
-    #[inline]
-    fn eps(&self) -> f64 {
-        if self.epsilon.is_finite() && self.epsilon > 1e-12 {
-            self.epsilon
-        } else {
-            1e-12
-        }
-    }
-
-    /// g, made positive and finite (1 otherwise).
-    #[inline]
-    fn gain(&self) -> f64 {
-        if self.gain.is_finite() && self.gain > 0.0 {
-            self.gain
-        } else {
-            1.0
-        }
-    }
-}
+use sensor_io::SensorView;
 
 /// The shared per-iteration state of the Ch. 2 tracker: the cylinder model, the current pose θ
 /// and its forward kinematics, the sensor point cloud `𝒳_s` (camera frame, mm), for every point
@@ -132,45 +46,6 @@ pub struct TrackingCtx<'m> {
     sensor: SensorView,
     silhouette: bool,
     raster: CylinderRaster,
-}
-
-/// What the image-space terms (E2D Eq. 2.3, E_wrist Eq. 2.4) read of the current frame: the
-/// camera of the processed images, for every pixel the linear index of the nearest sensor
-/// silhouette pixel (the distance transform of `S_s`, ANCHOR-FACTS §5.4), and the wristband
-/// axis when the segmentation found one.
-#[derive(Clone, Debug, Default)]
-pub struct SensorView {
-    /// Camera of the processed images; `None` before the first frame (image terms then add no
-    /// rows).
-    pub camera: Option<Camera>,
-    /// Per pixel (`v·width + u`) the nearest silhouette pixel; [`NO_PIXEL`] everywhere when the
-    /// silhouette is empty. Empty before the first frame.
-    pub nearest: Vec<u32>,
-    /// Wristband center and unit axis toward the hand (camera frame, mm).
-    pub wristband: Option<(Vector3<f64>, Vector3<f64>)>,
-}
-
-impl SensorView {
-    /// Whether pixel `(u, v)` (inside the image) belongs to the sensor silhouette `S_s`.
-    #[inline]
-    pub fn in_silhouette(&self, u: u32, v: u32) -> bool {
-        self.camera.as_ref().is_some_and(|c| {
-            let i = (v * c.width + u) as usize;
-            self.nearest.get(i).is_some_and(|&n| n as usize == i)
-        })
-    }
-
-    /// The nearest silhouette pixel `(u, v)` of pixel `(u, v)`, `None` outside the image or
-    /// when the silhouette is empty.
-    #[inline]
-    pub fn nearest_pixel(&self, u: u32, v: u32) -> Option<(u32, u32)> {
-        let c = self.camera.as_ref()?;
-        if u >= c.width || v >= c.height {
-            return None;
-        }
-        let n = *self.nearest.get((v * c.width + u) as usize)?;
-        (n != NO_PIXEL).then(|| (n % c.width, n / c.width))
-    }
 }
 
 impl<'m> TrackingCtx<'m> {
@@ -224,19 +99,7 @@ impl<'m> TrackingCtx<'m> {
     /// camera, silhouette distance transform and wristband ([`SensorView`]). Reuses the buffers.
     pub fn set_frame(&mut self, frame: &PreprocessedFrame) {
         self.set_points(&frame.points);
-        self.sensor.camera.clone_from(&frame.camera);
-        self.sensor.nearest.clear();
-        let consistent = frame.camera.as_ref().is_some_and(|c| {
-            frame.dt.width() == c.width
-                && frame.dt.height() == c.height
-                && frame.dt.nearest.len() == c.num_pixels()
-        });
-        if consistent {
-            self.sensor.nearest.extend_from_slice(&frame.dt.nearest);
-        } else {
-            self.sensor.camera = None;
-        }
-        self.sensor.wristband = frame.hand.wristband;
+        self.sensor.set_frame(frame);
     }
 
     /// The sensor data of the image-space terms.

@@ -58,5 +58,8 @@ mod tests;
 #[cfg(test)]
 mod tests_e2d;
 
-pub use context::{CorrespondenceCallback, IrlsParams, SensorView, TrackingCtx};
-pub use tracker::{EnabledTerms, FrameStats, LossParams, Tracker, TrackerConfig, TrackerError};
+pub use context::{CorrespondenceCallback, TrackingCtx};
+pub use hand_model::solver::IrlsParams;
+pub use sensor_io::SensorView;
+pub use hand_model::solver::{FrameStats, LossParams};
+pub use tracker::{EnabledTerms, Tracker, TrackerConfig, TrackerError};

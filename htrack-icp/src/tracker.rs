@@ -24,15 +24,16 @@ use hand_model::solver::terms::{
     JointLimits, JointLimitsParams, PosePrior, PosePriorParams, Temporal, TemporalParams,
 };
 use hand_model::solver::{
-    cylinder_points, EnergyTerm, IterInfo, LmCallback, LmError, LmOptions, LmSolver, LmWorkspace,
+    cylinder_points, placement_directions, FrameStats, LossParams, EnergyTerm, IterInfo, LmCallback, LmError, LmOptions, LmSolver, LmWorkspace,
     PcaPrior, TermError,
 };
-use nalgebra::{Matrix2, SymmetricEigen, Vector2, Vector3};
+use nalgebra::{Vector2, Vector3};
 use sensor_io::preprocess::PreprocessedFrame;
 use sensor_io::record::HandRecord;
 use serde::{Deserialize, Serialize};
 
-use crate::context::{CorrespondenceCallback, IrlsParams, TrackingCtx};
+use crate::context::{CorrespondenceCallback, TrackingCtx};
+use hand_model::solver::IrlsParams;
 use crate::terms::{
     Collision, CollisionParams, E2d, E2dParams, E3d, E3dParams, Wrist, WristParams,
 };
@@ -67,34 +68,6 @@ impl Default for EnabledTerms {
             pose_prior: true,
             joint_limits: true,
             temporal: true,
-        }
-    }
-}
-
-/// When a frame counts as failed and tracking as lost (module docs).
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-#[serde(default, deny_unknown_fields)]
-pub struct LossParams {
-    /// A frame fails above this mean point-to-model distance (mm).
-    pub max_mean_distance: f64,
-    /// Points farther than this from the model are unexplained (mm).
-    pub unexplained_distance: f64,
-    /// A frame fails above this fraction of unexplained points.
-    pub max_unexplained: f64,
-    /// Consecutive failed frames before re-initialization (htrack: 10).
-    pub window: usize,
-    /// Fewer sensor points than this: the frame has no hand (`no_hand`).
-    pub min_points: usize,
-}
-
-impl Default for LossParams {
-    fn default() -> Self {
-        Self {
-            max_mean_distance: 6.0,
-            unexplained_distance: 15.0,
-            max_unexplained: 0.15,
-            window: 3,
-            min_points: 50,
         }
     }
 }
@@ -162,17 +135,6 @@ pub enum TrackerError {
     /// Invalid term settings or a prior that does not fit the model.
     #[error("model: {0}")]
     Model(#[from] hand_model::ModelError),
-}
-
-/// How one frame went.
-#[derive(Clone, Debug, Default, PartialEq)]
-pub struct FrameStats {
-    /// Mean distance of the sensor points to the model (mm) at the returned pose.
-    pub mean_distance: f64,
-    /// Fraction of sensor points farther than [`LossParams::unexplained_distance`].
-    pub unexplained: f64,
-    /// Whether the frame failed by [`LossParams`].
-    pub failed: bool,
 }
 
 /// [`CorrespondenceCallback`], timed: the correspondence stage (re-pose, front-facing
@@ -475,36 +437,13 @@ impl<'m> Tracker<'m> {
     /// Distances of the sensor points to the model at the last linearization point (the pose
     /// before the last LM update: the last step is small, and this saves a correspondence pass).
     fn frame_stats(&self) -> FrameStats {
-        let p = &self.config.loss;
-        let (mut sum, mut n, mut far) = (0.0, 0usize, 0usize);
-        for (c, x) in self.ctx.correspondences().iter().zip(self.ctx.points()) {
-            let d = c.as_ref().map_or(f64::INFINITY, |c| (c.point - x).norm());
-            if d.is_finite() {
-                sum += d;
-                n += 1;
-            }
-            if d > p.unexplained_distance {
-                far += 1;
-            }
-        }
-        let total = self.ctx.points().len().max(1);
-        let mean_distance = if n > 0 { sum / n as f64 } else { f64::INFINITY };
-        let unexplained = far as f64 / total as f64;
-        FrameStats {
-            mean_distance: if mean_distance.is_finite() {
-                mean_distance
-            } else {
-                1e9
-            },
-            unexplained,
-            failed: !(mean_distance <= p.max_mean_distance && unexplained <= p.max_unexplained),
-        }
-    }
-
-    /// Score of a fitted hypothesis (lower is better): mean distance plus a penalty per
-    /// unexplained point.
-    fn score(stats: &FrameStats) -> f64 {
-        stats.mean_distance + 100.0 * stats.unexplained
+        let distances = self
+            .ctx
+            .correspondences()
+            .iter()
+            .zip(self.ctx.points())
+            .map(|(c, x)| c.as_ref().map(|c| (c.point - x).norm()));
+        FrameStats::from_distances(distances, &self.config.loss)
     }
 
     /// Re-initialize (module docs): solve from every hypothesis, keep the best; clears the
@@ -526,7 +465,7 @@ impl<'m> Tracker<'m> {
             if self.ctx.update(&pose, false).is_err() {
                 continue;
             }
-            let s = Self::score(&self.frame_stats());
+            let s = self.frame_stats().score();
             if s < best_score {
                 best_score = s;
                 self.best.values.clone_from(&pose.values);
@@ -545,25 +484,7 @@ impl<'m> Tracker<'m> {
     /// (10 mm behind the visible surface), fingers along ± the principal image axis of the
     /// cloud, or upright (fingers toward image −y).
     fn hypotheses(&self) -> Vec<Pose> {
-        let pts = self.ctx.points();
-        let n = pts.len().max(1) as f64;
-        let centroid = pts.iter().fold(Vector3::zeros(), |a, p| a + p) / n;
-        let mut cov = Matrix2::zeros();
-        for p in pts {
-            let d = Vector2::new(p.x - centroid.x, p.y - centroid.y);
-            cov += d * d.transpose();
-        }
-        let eig = SymmetricEigen::new(cov);
-        let axis = if eig.eigenvalues[0] >= eig.eigenvalues[1] {
-            eig.eigenvectors.column(0).into_owned()
-        } else {
-            eig.eigenvectors.column(1).into_owned()
-        };
-        let mut dirs = vec![Vector2::new(0.0, -1.0)];
-        if axis.iter().all(|v| v.is_finite()) && axis.norm() > 0.5 {
-            dirs.push(axis);
-            dirs.push(-axis);
-        }
+        let (centroid, dirs) = placement_directions(self.ctx.points());
         let target = centroid + Vector3::new(0.0, 0.0, 10.0);
         dirs.into_iter()
             .filter_map(|e| self.placed_mean_pose(e, &target))

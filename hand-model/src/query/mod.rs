@@ -129,6 +129,45 @@ pub(crate) fn combine(
     (s, radius, q)
 }
 
+/// Parameters `(s, t) ∈ [0, 1]²` minimizing `‖p0 + s u − (q0 + t v)‖` (Ericson, "Real-Time
+/// Collision Detection" §5.1.9; parallel axes take `s = 0`).
+pub fn segment_closest_params(
+    p0: &Vector3<f64>,
+    u: &Vector3<f64>,
+    q0: &Vector3<f64>,
+    v: &Vector3<f64>,
+) -> (f64, f64) {
+    const EPS: f64 = 1e-12;
+    let r = p0 - q0;
+    let (a, e, f) = (u.norm_squared(), v.norm_squared(), v.dot(&r));
+    if a <= EPS && e <= EPS {
+        return (0.0, 0.0);
+    }
+    if a <= EPS {
+        return (0.0, (f / e).clamp(0.0, 1.0));
+    }
+    let c = u.dot(&r);
+    if e <= EPS {
+        return ((-c / a).clamp(0.0, 1.0), 0.0);
+    }
+    let b = u.dot(v);
+    let denom = a * e - b * b;
+    let mut s = if denom > EPS * a * e {
+        ((b * f - c * e) / denom).clamp(0.0, 1.0)
+    } else {
+        0.0
+    };
+    let mut t = (b * s + f) / e;
+    if t < 0.0 {
+        t = 0.0;
+        s = (-c / a).clamp(0.0, 1.0);
+    } else if t > 1.0 {
+        t = 1.0;
+        s = ((b - c) / a).clamp(0.0, 1.0);
+    }
+    (s, t)
+}
+
 /// A unit vector orthogonal to the unit vector `u`, used when a direction is undefined (a query
 /// point on a skeleton axis): any choice gives a valid footpoint there.
 #[inline]

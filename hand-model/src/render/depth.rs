@@ -12,7 +12,7 @@
 use nalgebra::Vector3;
 
 use super::prepared::PreparedElement;
-use super::raycast::{cast_prepared, Ray};
+use super::raycast::{cast_prepared, Ray, RayHit};
 use crate::error::{ModelError, Result};
 use crate::shape::{Element, Sphere};
 
@@ -94,6 +94,19 @@ impl Intrinsics {
     pub fn project(&self, p: &Vector3<f64>) -> [f64; 2] {
         [self.fx * p.x / p.z + self.cx, self.fy * p.y / p.z + self.cy]
     }
+}
+
+/// One pixel that sees the model ([`DepthRenderer::render_hits`]).
+#[derive(Copy, Clone, Debug, PartialEq)]
+pub struct PixelHit {
+    /// Linear pixel index `v·width + u`.
+    pub pixel: u32,
+    /// Index of the element hit.
+    pub element: u32,
+    /// The hit point in the camera frame (mm).
+    pub point: Vector3<f64>,
+    /// Outward unit normal at the hit.
+    pub normal: Vector3<f64>,
 }
 
 /// A rendered frame (§3.3.2): per pixel (row-major, `v·width + u`) the depth, the element and
@@ -182,6 +195,52 @@ impl DepthRenderer {
         elements: &[Element],
         out: &mut DepthRender,
     ) -> Result<()> {
+        out.reset(intrinsics.width, intrinsics.height);
+        self.for_each_hit(intrinsics, spheres, elements, |_| true, |k, hit| {
+            out.depth[k] = hit.point.z as f32;
+            out.element[k] = hit.element as u32;
+            out.normal[k] = [
+                hit.normal.x as f32,
+                hit.normal.y as f32,
+                hit.normal.z as f32,
+            ];
+        })
+    }
+
+    /// The pixels that see the model, as a list instead of an image (what the m2d term of
+    /// Eq. 3.5 needs per solver iteration: no full-image buffers to clear): only pixels for
+    /// which `keep(v·width + u)` holds are ray cast, and each one that hits is appended to
+    /// `out` (cleared first) in raster order within tiles. Same rays and hits as
+    /// [`render`](Self::render), same errors.
+    pub fn render_hits(
+        &mut self,
+        intrinsics: &Intrinsics,
+        spheres: &[Sphere],
+        elements: &[Element],
+        keep: impl FnMut(usize) -> bool,
+        out: &mut Vec<PixelHit>,
+    ) -> Result<()> {
+        out.clear();
+        self.for_each_hit(intrinsics, spheres, elements, keep, |k, hit| {
+            out.push(PixelHit {
+                pixel: k as u32,
+                element: hit.element as u32,
+                point: hit.point,
+                normal: hit.normal,
+            })
+        })
+    }
+
+    /// The tile loop shared by the renderers: bins the elements, casts the ray of every kept
+    /// pixel of a non-empty tile and reports each hit with its linear pixel index.
+    fn for_each_hit(
+        &mut self,
+        intrinsics: &Intrinsics,
+        spheres: &[Sphere],
+        elements: &[Element],
+        mut keep: impl FnMut(usize) -> bool,
+        mut on_hit: impl FnMut(usize, &RayHit),
+    ) -> Result<()> {
         intrinsics.validate()?;
         self.prepared.clear();
         for (i, e) in elements.iter().enumerate() {
@@ -194,7 +253,6 @@ impl DepthRenderer {
             self.prepared.push(p);
         }
         let (w, h) = (intrinsics.width as usize, intrinsics.height as usize);
-        out.reset(intrinsics.width, intrinsics.height);
         let (tw, th) = (w.div_ceil(TILE), h.div_ceil(TILE));
         self.bin(intrinsics, tw, th);
 
@@ -208,18 +266,15 @@ impl DepthRenderer {
                 }
                 for v in ty * TILE..((ty + 1) * TILE).min(h) {
                     for u in tx * TILE..((tx + 1) * TILE).min(w) {
+                        let k = v * w + u;
+                        if !keep(k) {
+                            continue;
+                        }
                         let ray = intrinsics.pixel_ray(u as f64, v as f64);
                         let hit =
                             cast_prepared(&ray, &self.prepared, items.iter().map(|&i| i as usize));
                         if let Some(hit) = hit {
-                            let k = v * w + u;
-                            out.depth[k] = hit.point.z as f32;
-                            out.element[k] = hit.element as u32;
-                            out.normal[k] = [
-                                hit.normal.x as f32,
-                                hit.normal.y as f32,
-                                hit.normal.z as f32,
-                            ];
+                            on_hit(k, &hit);
                         }
                     }
                 }
@@ -385,6 +440,33 @@ mod tests {
             }
         }
         out
+    }
+
+    #[test]
+    fn hit_list_equals_the_image_on_kept_pixels() {
+        let (spheres, elements) = posed_hand();
+        let intr = intrinsics(160, 120, 150.0);
+        let mut renderer = DepthRenderer::new();
+        let mut image = DepthRender::default();
+        renderer
+            .render(&intr, &spheres, &elements, &mut image)
+            .unwrap();
+        let mut hits = Vec::new();
+        let keep = |k: usize| k % 3 != 0;
+        renderer
+            .render_hits(&intr, &spheres, &elements, keep, &mut hits)
+            .unwrap();
+        let expected: Vec<usize> = (0..image.element.len())
+            .filter(|&k| keep(k) && image.element[k] != NO_ELEMENT)
+            .collect();
+        let mut got: Vec<usize> = hits.iter().map(|h| h.pixel as usize).collect();
+        got.sort_unstable();
+        assert_eq!(got, expected);
+        for h in &hits {
+            let k = h.pixel as usize;
+            assert_eq!(h.element, image.element[k]);
+            assert_eq!(h.point.z as f32, image.depth[k]);
+        }
     }
 
     #[test]

@@ -19,7 +19,7 @@ pub mod raycast;
 #[cfg(test)]
 mod testutil;
 
-pub use depth::{render_depth, DepthRender, DepthRenderer, Intrinsics, NO_ELEMENT};
+pub use depth::{render_depth, DepthRender, DepthRenderer, Intrinsics, PixelHit, NO_ELEMENT};
 pub use mesh::{extract_mesh, MeshOptions, TriMesh};
 pub use prepared::PreparedElement;
 pub use raycast::{

@@ -21,6 +21,9 @@
 //! - [`terms`]: joint limits (Eq. 2.8), damping, temporal (Eq. 2.9), the PCA pose prior
 //!   (Eq. 2.5–2.6, §2.7.1), point targets.
 //! - [`PcaPrior`]: pose-space PCA data and the loader of the original binary files.
+//! - [`FrameLoop`] / [`TrackingProblem`] / [`LossParams`]: the per-frame control flow of the
+//!   trackers (warm start, loss detection, re-initialization), and [`IrlsParams`], the robust ℓ1
+//!   reweighting of their data terms.
 //! - [`check`]: finite-difference checks of a term's gradient and Gauss–Newton Hessian.
 //!
 //! # Example
@@ -62,8 +65,12 @@
 //! assert!(report.energy_after < 1e-9 * report.energy_before);
 //! ```
 
+mod blocks;
 pub mod check;
+mod frame_loop;
+mod irls;
 mod lm;
+mod loss;
 mod normal_equations;
 mod pca;
 mod points;
@@ -73,10 +80,14 @@ pub mod terms;
 #[cfg(test)]
 mod tests;
 
+pub use blocks::{PackedBlocks, BLOCK_DOFS, MAX_BLOCKS};
+pub use frame_loop::{FrameLoop, FrameOutcome, TrackingProblem};
+pub use irls::IrlsParams;
 pub use lm::{
     callback_fn, FnCallback, IterInfo, LmCallback, LmError, LmOptions, LmReport, LmSolver,
     LmWorkspace, OptionsError, RePose, TermEnergy, Termination,
 };
+pub use loss::{placement_directions, FrameStats, LossParams};
 pub use normal_equations::{NormalEquations, TermStats};
 pub use pca::{
     htrack_groups, parse_htrack_matrix, parse_htrack_vector, read_htrack_matrix,

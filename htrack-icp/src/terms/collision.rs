@@ -3,6 +3,7 @@
 
 use hand_model::cylinder::{CylinderModel, Segment};
 use hand_model::kinematics::{PosedSkeleton, Skeleton};
+use hand_model::query::segment_closest_params;
 use hand_model::solver::{EnergyTerm, NormalEquations, PoseContext, TermError, TermStats};
 use nalgebra::{Matrix2, Vector2, Vector3};
 use serde::{Deserialize, Serialize};
@@ -166,7 +167,7 @@ pub fn contact(
     let u = ga.transform_point(&sa.end_local()) - p0;
     let q0 = gb.translation;
     let v = gb.transform_point(&sb.end_local()) - q0;
-    let (s, t) = closest_params(&p0, &u, &q0, &v);
+    let (s, t) = segment_closest_params(&p0, &u, &q0, &v);
     let point_a = p0 + u * s;
     let point_b = q0 + v * t;
     let d = (point_a - point_b).norm();
@@ -177,45 +178,6 @@ pub fn contact(
         params: (s, t),
         penetration,
     })
-}
-
-/// Parameters `(s, t) ∈ [0, 1]²` minimizing `‖p0 + s u − (q0 + t v)‖` (Ericson, "Real-Time
-/// Collision Detection" §5.1.9; parallel axes take `s = 0`).
-fn closest_params(
-    p0: &Vector3<f64>,
-    u: &Vector3<f64>,
-    q0: &Vector3<f64>,
-    v: &Vector3<f64>,
-) -> (f64, f64) {
-    const EPS: f64 = 1e-12;
-    let r = p0 - q0;
-    let (a, e, f) = (u.norm_squared(), v.norm_squared(), v.dot(&r));
-    if a <= EPS && e <= EPS {
-        return (0.0, 0.0);
-    }
-    if a <= EPS {
-        return (0.0, (f / e).clamp(0.0, 1.0));
-    }
-    let c = u.dot(&r);
-    if e <= EPS {
-        return ((-c / a).clamp(0.0, 1.0), 0.0);
-    }
-    let b = u.dot(v);
-    let denom = a * e - b * b;
-    let mut s = if denom > EPS * a * e {
-        ((b * f - c * e) / denom).clamp(0.0, 1.0)
-    } else {
-        0.0
-    };
-    let mut t = (b * s + f) / e;
-    if t < 0.0 {
-        t = 0.0;
-        s = (-c / a).clamp(0.0, 1.0);
-    } else if t > 1.0 {
-        t = 1.0;
-        s = ((b - c) / a).clamp(0.0, 1.0);
-    }
-    (s, t)
 }
 
 impl EnergyTerm<TrackingCtx<'_>> for Collision {

@@ -1,6 +1,8 @@
 //! The point cloud alignment term E3D (thesis Eq. 2.2, linearized in §2.7.4).
 
-use hand_model::solver::{EnergyTerm, NormalEquations, PoseContext, TermError, TermStats};
+use hand_model::solver::{
+    EnergyTerm, NormalEquations, PackedBlocks, PoseContext, TermError, TermStats,
+};
 use serde::{Deserialize, Serialize};
 
 use crate::context::TrackingCtx;
@@ -21,13 +23,6 @@ impl Default for E3dParams {
 
 /// Most DOFs on one bone's chain (the cylinder skeleton has at most 6 + 4).
 const MAX_CHAIN: usize = 64;
-
-/// Most bones whose rows are summed in stack blocks (see [`E3d`]'s `accumulate`).
-const BLOCK_BONES: usize = 32;
-/// Longest chain of a stack block.
-const BLOCK_CHAIN: usize = 12;
-/// Packed upper triangle of a `BLOCK_CHAIN²` block.
-const BLOCK_PACKED: usize = BLOCK_CHAIN * (BLOCK_CHAIN + 1) / 2;
 
 /// E3D, thesis Eq. 2.2: `E3D = ω₁ Σ_{x∈𝒳_s} ‖x − Π_M(x, θ)‖₂` (a sum of unsquared distances,
 /// the mixed ℓ2/ℓ1 norm), with the front-facing correspondences `y = Π_M(x, θ)` of §2.3.1 held
@@ -90,15 +85,10 @@ impl EnergyTerm<TrackingCtx<'_>> for E3d {
         let irls = ctx.irls();
         let bones = skeleton.bones().len();
         // The points of one bone share its chain: their rows are summed per bone in a packed
-        // dense block (no index arithmetic per entry) and added once per bone. Models with more
-        // bones or longer chains than the stack blocks hold add row by row.
-        let blocked =
-            bones <= BLOCK_BONES && (0..bones).all(|b| skeleton.chain(b).len() <= BLOCK_CHAIN);
-        let mut upper = [[0.0f64; BLOCK_PACKED]; BLOCK_BONES];
-        let mut rhs = [[0.0f64; BLOCK_CHAIN]; BLOCK_BONES];
-        let mut used = [false; BLOCK_BONES];
+        // block and added once per bone; bones beyond the blocks' capacity add row by row.
+        let mut blocks = PackedBlocks::new();
         let mut cols = [(0usize, 0.0f64); MAX_CHAIN];
-        let mut jac = [0.0f64; BLOCK_CHAIN];
+        let mut jac = [0.0f64; MAX_CHAIN];
         let mut stats = TermStats::ZERO;
         for ((c, &r), &w) in ctx
             .correspondences()
@@ -114,31 +104,20 @@ impl EnergyTerm<TrackingCtx<'_>> for E3d {
                 });
             }
             let chain = skeleton.chain(c.bone);
-            if chain.len() > MAX_CHAIN {
+            let k = chain.len();
+            if k > MAX_CHAIN {
                 return Err(TermError::Failed("kinematic chain longer than 64 DOFs"));
             }
-            if blocked {
-                let k = chain.len();
-                for (j, &d) in jac.iter_mut().zip(chain) {
-                    *j = c.normal.dot(&posed.column(d, &c.point));
-                }
-                let wt = omega * w;
-                let (up, b) = (&mut upper[c.bone], &mut rhs[c.bone]);
-                used[c.bone] = true;
-                let mut off = 0;
-                for a in 0..k {
-                    let wa = wt * jac[a];
-                    b[a] -= wa * r;
-                    for (x, &jb) in up[off..off + k - a].iter_mut().zip(&jac[a..k]) {
-                        *x += wa * jb;
-                    }
-                    off += k - a;
-                }
+            for (j, &d) in jac.iter_mut().zip(chain) {
+                *j = c.normal.dot(&posed.column(d, &c.point));
+            }
+            if PackedBlocks::fits(c.bone, k) {
+                blocks.add_row(c.bone, &jac[..k], r, omega * w)?;
             } else {
-                for (slot, &d) in cols.iter_mut().zip(chain) {
-                    *slot = (d, c.normal.dot(&posed.column(d, &c.point)));
+                for ((slot, &d), &j) in cols.iter_mut().zip(chain).zip(&jac) {
+                    *slot = (d, j);
                 }
-                ne.add_row(&cols[..chain.len()], r, omega * w)?;
+                ne.add_row(&cols[..k], r, omega * w)?;
             }
             let energy = if reweighted { irls.penalty(r) } else { r * r };
             stats += TermStats {
@@ -146,9 +125,7 @@ impl EnergyTerm<TrackingCtx<'_>> for E3d {
                 rows: 1,
             };
         }
-        for (bone, _) in used.iter().enumerate().filter(|(_, &u)| u) {
-            ne.add_packed_block(skeleton.chain(bone), &upper[bone], &rhs[bone])?;
-        }
+        blocks.flush(ne, |bone| skeleton.chain(bone))?;
         Ok(stats)
     }
 }

@@ -1,0 +1,210 @@
+//! The per-frame control flow shared by the trackers (thesis §2.4 Fig. 2.3, §3.3): warm start
+//! from the previous frame, loss detection over a window of failed frames and re-initialization
+//! from several hypotheses ([`super::loss`]). The trackers provide the solve itself through
+//! [`TrackingProblem`]; this loop only decides which poses to solve from and which to keep.
+
+use super::loss::{FrameStats, LossParams};
+use crate::kinematics::Pose;
+
+/// What a tracker provides to [`FrameLoop`]: its solve over the current frame's data.
+pub trait TrackingProblem {
+    /// Run the tracker's LM solve from `pose` in place; false when it failed or left a
+    /// non-finite pose.
+    fn solve(&mut self, pose: &mut Pose) -> bool;
+    /// Recompute the correspondences at `pose` (for scoring a solved hypothesis); false on
+    /// failure.
+    fn refresh(&mut self, pose: &Pose) -> bool;
+    /// The loss statistics at the last linearization point (or refresh).
+    fn frame_stats(&self, params: &LossParams) -> FrameStats;
+    /// Initial poses placed on the current frame's data.
+    fn hypotheses(&self) -> Vec<Pose>;
+    /// Forget the temporal history (after a re-initialization or a frame without a hand).
+    fn clear_history(&mut self);
+}
+
+/// How one frame went in [`FrameLoop::step`].
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct FrameOutcome {
+    /// DESIGN.md flags: `no_hand`, `reinitialized`, `solver_failed`, `lost`.
+    pub flags: Vec<&'static str>,
+    /// Loss statistics at the returned pose (`None` for a frame without a hand).
+    pub stats: Option<FrameStats>,
+}
+
+/// The warm-start / loss / re-initialization state of one sequence.
+#[derive(Clone, Debug)]
+pub struct FrameLoop {
+    /// The current pose θ (never non-finite).
+    pub pose: Pose,
+    /// The pose of a fresh start (e.g. the PCA mean pose), used when every hypothesis fails.
+    pub fallback: Pose,
+    loss: LossParams,
+    initialized: bool,
+    failed_run: usize,
+}
+
+impl FrameLoop {
+    /// A loop that starts uninitialized at `fallback` (the first frame re-initializes).
+    pub fn new(fallback: Pose, loss: LossParams) -> Self {
+        Self {
+            pose: fallback.clone(),
+            fallback,
+            loss,
+            initialized: false,
+            failed_run: 0,
+        }
+    }
+
+    /// The loss settings.
+    pub fn loss(&self) -> &LossParams {
+        &self.loss
+    }
+
+    /// Continue from `pose` at the next frame instead of re-initializing.
+    pub fn set_pose(&mut self, pose: Pose) {
+        self.pose = pose;
+        self.initialized = true;
+        self.failed_run = 0;
+    }
+
+    /// Whether the next frame warm-starts (true) or re-initializes.
+    pub fn is_initialized(&self) -> bool {
+        self.initialized
+    }
+
+    /// Track one frame whose data the problem already holds; `num_points` is the number of
+    /// sensor points (fewer than [`LossParams::min_points`]: `no_hand`, the pose is kept and
+    /// the next frame re-initializes). A failed solve keeps the previous pose
+    /// (`solver_failed`); [`LossParams::window`] failed frames in a row re-initialize.
+    pub fn step(&mut self, problem: &mut impl TrackingProblem, num_points: usize) -> FrameOutcome {
+        let mut out = FrameOutcome::default();
+        if num_points < self.loss.min_points.max(1) {
+            out.flags.push("no_hand");
+            self.initialized = false;
+            self.failed_run = 0;
+            problem.clear_history();
+            return out;
+        }
+        if !self.initialized {
+            self.reinitialize(problem);
+            out.flags.push("reinitialized");
+        } else {
+            let mut trial = self.pose.clone();
+            if problem.solve(&mut trial) {
+                self.pose = trial;
+            } else {
+                out.flags.push("solver_failed");
+            }
+        }
+        let mut stats = problem.frame_stats(&self.loss);
+        if stats.failed {
+            self.failed_run += 1;
+            if self.failed_run >= self.loss.window {
+                self.reinitialize(problem);
+                if !out.flags.contains(&"reinitialized") {
+                    out.flags.push("reinitialized");
+                }
+                self.failed_run = 0;
+                stats = problem.frame_stats(&self.loss);
+            }
+        } else {
+            self.failed_run = 0;
+        }
+        if stats.failed {
+            out.flags.push("lost");
+        }
+        out.stats = Some(stats);
+        self.initialized = true;
+        out
+    }
+
+    /// Solve from the current pose (when initialized) and every hypothesis, keep the best by
+    /// [`FrameStats::score`]; the problem is left refreshed at the chosen pose. The current
+    /// pose is always a candidate, so this never makes the fit worse by that measure.
+    fn reinitialize(&mut self, problem: &mut impl TrackingProblem) {
+        problem.clear_history();
+        let mut best: Option<(f64, Pose)> = None;
+        let current = self.initialized.then(|| self.pose.clone());
+        for mut pose in current.into_iter().chain(problem.hypotheses()) {
+            if !problem.solve(&mut pose) || !problem.refresh(&pose) {
+                continue;
+            }
+            let s = problem.frame_stats(&self.loss).score();
+            if best.as_ref().is_none_or(|(b, _)| s < *b) {
+                best = Some((s, pose));
+            }
+        }
+        self.pose = best.map_or_else(|| self.fallback.clone(), |(_, p)| p);
+        // Leave the problem at the chosen pose for the frame statistics.
+        let _ = problem.refresh(&self.pose);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A 1-DOF problem: the data is explained when θ is within 1 of `target`; the solve jumps
+    /// to the target only from within `reach` of it.
+    struct Toy {
+        target: f64,
+        reach: f64,
+        at: f64,
+        solves: usize,
+        cleared: usize,
+    }
+
+    impl TrackingProblem for Toy {
+        fn solve(&mut self, pose: &mut Pose) -> bool {
+            self.solves += 1;
+            if (pose.values[0] - self.target).abs() < self.reach {
+                pose.values[0] = self.target;
+            }
+            self.at = pose.values[0];
+            true
+        }
+        fn refresh(&mut self, pose: &Pose) -> bool {
+            self.at = pose.values[0];
+            true
+        }
+        fn frame_stats(&self, p: &LossParams) -> FrameStats {
+            let d = (self.at - self.target).abs();
+            FrameStats::from_distances(std::iter::repeat_n(Some(d), 100), p)
+        }
+        fn hypotheses(&self) -> Vec<Pose> {
+            vec![Pose {
+                values: vec![self.target + 5.0],
+            }]
+        }
+        fn clear_history(&mut self) {
+            self.cleared += 1;
+        }
+    }
+
+    #[test]
+    fn loses_after_the_window_and_recovers_by_reinitializing() {
+        let mut fl = FrameLoop::new(Pose { values: vec![0.0] }, LossParams::default());
+        let mut toy = Toy {
+            target: 0.0,
+            reach: 10.0,
+            at: 0.0,
+            solves: 0,
+            cleared: 0,
+        };
+        assert_eq!(fl.step(&mut toy, 10).flags, ["no_hand"]);
+        assert_eq!(fl.step(&mut toy, 500).flags, ["reinitialized"]);
+        assert!(fl.step(&mut toy, 500).flags.is_empty());
+        // The hand jumps out of the solve's reach: failed frames, then a re-initialization
+        // from the hypothesis (within reach) after the window.
+        toy.target = 100.0;
+        toy.reach = 6.0;
+        let window = fl.loss().window;
+        for _ in 0..window - 1 {
+            assert_eq!(fl.step(&mut toy, 500).flags, ["lost"]);
+        }
+        let last = fl.step(&mut toy, 500);
+        assert_eq!(last.flags, ["reinitialized"]);
+        assert_eq!(fl.pose.values[0], 100.0);
+        assert!(toy.cleared >= 2);
+    }
+}

@@ -1,0 +1,143 @@
+//! Loss detection and re-initialization hypotheses shared by the trackers (thesis §2.4, §3.6
+//! "Generative tracker"; ANCHOR-FACTS §5.7).
+//!
+//! htrack's `TrackingMonitor` fed a logistic of push/pull errors into a 10-frame window, hmodel
+//! and honline thresholded the pull error at 6 mm; both then re-initialized with Qian et al.'s
+//! detector. Here a frame *fails* when, after the solve, the mean distance of the sensor points
+//! to the model exceeds [`LossParams::max_mean_distance`] or more than
+//! [`LossParams::max_unexplained`] of them lie farther than
+//! [`LossParams::unexplained_distance`]; tracking is *lost* after [`LossParams::window`]
+//! consecutive failed frames. The re-initializer of each tracker solves from a few hypotheses
+//! ([`placement_directions`]) and keeps the best by [`FrameStats::score`].
+
+use nalgebra::{Matrix2, SymmetricEigen, Vector2, Vector3};
+use serde::{Deserialize, Serialize};
+
+/// When a frame counts as failed and tracking as lost (module docs).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct LossParams {
+    /// A frame fails above this mean point-to-model distance (mm; hmodel's pull threshold 6).
+    pub max_mean_distance: f64,
+    /// Points farther than this from the model are unexplained (mm).
+    pub unexplained_distance: f64,
+    /// A frame fails above this fraction of unexplained points.
+    pub max_unexplained: f64,
+    /// Consecutive failed frames before re-initialization (htrack: 10).
+    pub window: usize,
+    /// Fewer sensor points than this: the frame has no hand (`no_hand`).
+    pub min_points: usize,
+}
+
+impl Default for LossParams {
+    fn default() -> Self {
+        Self {
+            max_mean_distance: 6.0,
+            unexplained_distance: 15.0,
+            max_unexplained: 0.15,
+            window: 3,
+            min_points: 50,
+        }
+    }
+}
+
+/// How one frame went.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct FrameStats {
+    /// Mean distance of the sensor points to the model (mm) at the returned pose.
+    pub mean_distance: f64,
+    /// Fraction of sensor points farther than [`LossParams::unexplained_distance`].
+    pub unexplained: f64,
+    /// Whether the frame failed by [`LossParams`].
+    pub failed: bool,
+}
+
+impl FrameStats {
+    /// The statistics of one frame from the point-to-model distance of each sensor point
+    /// (`None` or non-finite: the point has no correspondence and counts as unexplained).
+    pub fn from_distances(distances: impl Iterator<Item = Option<f64>>, p: &LossParams) -> Self {
+        let (mut sum, mut n, mut far, mut total) = (0.0, 0usize, 0usize, 0usize);
+        for d in distances {
+            total += 1;
+            let d = d.filter(|d| d.is_finite()).unwrap_or(f64::INFINITY);
+            if d.is_finite() {
+                sum += d;
+                n += 1;
+            }
+            if d > p.unexplained_distance {
+                far += 1;
+            }
+        }
+        let mean = if n > 0 { sum / n as f64 } else { f64::INFINITY };
+        let unexplained = far as f64 / total.max(1) as f64;
+        Self {
+            mean_distance: if mean.is_finite() { mean } else { 1e9 },
+            unexplained,
+            failed: !(mean <= p.max_mean_distance && unexplained <= p.max_unexplained),
+        }
+    }
+
+    /// Score of a fitted hypothesis (lower is better): mean distance plus a penalty per
+    /// unexplained point.
+    pub fn score(&self) -> f64 {
+        self.mean_distance + 100.0 * self.unexplained
+    }
+}
+
+/// Where re-initialization hypotheses put the hand: the point cloud's centroid and the image
+/// directions the fingers may point to — upright (image −y) and ± the principal image axis of
+/// the cloud when it has one. Empty input gives the origin and the upright direction only.
+pub fn placement_directions(points: &[Vector3<f64>]) -> (Vector3<f64>, Vec<Vector2<f64>>) {
+    let n = points.len().max(1) as f64;
+    let centroid = points.iter().fold(Vector3::zeros(), |a, p| a + p) / n;
+    let mut cov = Matrix2::zeros();
+    for p in points {
+        let d = Vector2::new(p.x - centroid.x, p.y - centroid.y);
+        cov += d * d.transpose();
+    }
+    let eig = SymmetricEigen::new(cov);
+    let k = if eig.eigenvalues[0] >= eig.eigenvalues[1] {
+        0
+    } else {
+        1
+    };
+    let axis = eig.eigenvectors.column(k).into_owned();
+    let mut dirs = vec![Vector2::new(0.0, -1.0)];
+    if axis.iter().all(|v| v.is_finite()) && axis.norm() > 0.5 && points.len() > 1 {
+        dirs.push(axis);
+        dirs.push(-axis);
+    }
+    (centroid, dirs)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn stats_count_unexplained_and_missing_points() {
+        let p = LossParams::default();
+        let d = [Some(1.0), Some(3.0), None, Some(20.0)];
+        let s = FrameStats::from_distances(d.into_iter(), &p);
+        assert!((s.mean_distance - 8.0).abs() < 1e-12);
+        assert!((s.unexplained - 0.5).abs() < 1e-12);
+        assert!(s.failed);
+        let ok = FrameStats::from_distances([Some(1.0); 10].into_iter(), &p);
+        assert!(!ok.failed && ok.score() == 1.0);
+        let empty = FrameStats::from_distances(std::iter::empty(), &p);
+        assert!(empty.failed && empty.mean_distance.is_finite());
+    }
+
+    #[test]
+    fn directions_follow_the_cloud() {
+        let pts: Vec<_> = (0..50)
+            .map(|i| Vector3::new(f64::from(i) * 2.0, 0.5 * f64::from(i % 3), 400.0))
+            .collect();
+        let (c, dirs) = placement_directions(&pts);
+        assert!((c.x - 49.0).abs() < 1e-9);
+        assert_eq!(dirs.len(), 3);
+        assert!(dirs[1].x.abs() > 0.99);
+        let (_, one) = placement_directions(&[]);
+        assert_eq!(one, vec![Vector2::new(0.0, -1.0)]);
+    }
+}

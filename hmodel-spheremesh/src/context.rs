@@ -1,0 +1,413 @@
+//! The per-iteration context of the sphere-mesh tracker (STYLE practice 5): the posed template
+//! and its query geometry, the sensor points with their monocular front-facing correspondences
+//! (thesis §3.3.1, Fig. 3.9) and IRLS weights, and the model→data push constraints of Eq. 3.5.
+
+use hand_model::kinematics::{Pose, PosedSkeleton, Skeleton};
+use hand_model::query::{Projection, SphereMeshGeometry, View};
+use hand_model::render::{DepthRenderer, Intrinsics, PixelHit};
+use hand_model::shape::Element;
+use hand_model::solver::{IrlsParams, IterInfo, LmCallback, PoseContext, TermError};
+use hand_model::spheremesh::{PosedSphereMesh, SphereMeshTemplate};
+use hand_model::ModelError;
+use nalgebra::{Vector2, Vector3};
+use sensor_io::preprocess::PreprocessedFrame;
+use sensor_io::{Camera, SensorView};
+use serde::{Deserialize, Serialize};
+
+use crate::jacobian::FootpointJacobian;
+
+/// How the model→data term (Eq. 3.5) finds the model's parts outside the sensor silhouette.
+#[derive(Copy, Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum M2dMode {
+    /// Render the model from the sensor camera (§3.3.2: tiled CPU ray casting, only the pixels
+    /// outside the sensor silhouette) and push every rendered pixel outside it (the thesis).
+    Render,
+    /// The faster alternative of §3.6 "Downsampling": push the projected sphere centers that
+    /// fall outside the sensor silhouette (no rendering).
+    Centers,
+}
+
+/// One model→data constraint of Eq. 3.5: a model point that projects outside the sensor
+/// silhouette, with the nearest silhouette pixel it is pushed to.
+#[derive(Copy, Clone, Debug, PartialEq)]
+pub struct SilhouettePush {
+    /// Element carrying the point.
+    pub element: u32,
+    /// Spheres and barycentric weights of the point (as in [`Projection`]), so that its
+    /// Jacobian is exact on multi-bone elements.
+    pub spheres: [u32; 3],
+    /// Weights of `spheres`.
+    pub weights: [f64; 3],
+    /// The model point (camera frame, mm).
+    pub point: Vector3<f64>,
+    /// `Π_D(x)`: the center of the nearest sensor-silhouette pixel (distance transform).
+    pub target: Vector2<f64>,
+}
+
+/// Shared state of one frame's solve (module docs), refreshed by [`TrackingCtx::update`] before
+/// every LM iteration ([`CorrespondenceCallback`]); allocation-free once the buffers have held
+/// the current number of points.
+#[derive(Clone, Debug)]
+pub struct TrackingCtx<'m> {
+    template: &'m SphereMeshTemplate,
+    elements: Vec<Element>,
+    jacobian: FootpointJacobian,
+    /// Per sphere, an element that holds it (for the Jacobian of a sphere center).
+    sphere_element: Vec<u32>,
+    pose: Pose,
+    posed: PosedSphereMesh,
+    geometry: SphereMeshGeometry,
+    points: Vec<Vector3<f64>>,
+    correspondences: Vec<Option<Projection>>,
+    directions: Vec<Vector3<f64>>,
+    residuals: Vec<f64>,
+    weights: Vec<f64>,
+    reweighted: bool,
+    rigid_only: bool,
+    view: View,
+    front_facing: bool,
+    irls: IrlsParams,
+    sensor: SensorView,
+    m2d: Option<M2dMode>,
+    renderer: DepthRenderer,
+    hits: Vec<PixelHit>,
+    pushes: Vec<SilhouettePush>,
+}
+
+/// The sensor camera as the renderer's intrinsics.
+pub fn intrinsics(c: &Camera) -> Intrinsics {
+    Intrinsics {
+        fx: c.fx,
+        fy: c.fy,
+        cx: c.cx,
+        cy: c.cy,
+        width: c.width,
+        height: c.height,
+    }
+}
+
+impl<'m> TrackingCtx<'m> {
+    /// A context at the rest pose with no points. `view` is the camera of the front-facing test
+    /// (thesis: orthographic along +z; [`View::Perspective`] at the origin is the sensor's
+    /// pinhole). An error for a template whose elements the Jacobian cannot hold or whose rest
+    /// spheres are invalid.
+    pub fn new(
+        template: &'m SphereMeshTemplate,
+        view: View,
+        irls: IrlsParams,
+    ) -> Result<Self, ModelError> {
+        let pose = Pose::zeros(&template.skeleton);
+        let posed = PosedSphereMesh::new(template, &pose);
+        let elements: Vec<Element> = template.elements.iter().map(|e| e.element).collect();
+        let geometry = SphereMeshGeometry::new(&posed.spheres, &elements).map_err(|e| {
+            ModelError::InvalidArgument {
+                name: "template",
+                reason: e.to_string(),
+            }
+        })?;
+        let mut sphere_element = vec![u32::MAX; template.spheres.len()];
+        for (e, el) in elements.iter().enumerate() {
+            for &s in el.spheres() {
+                if sphere_element[s as usize] == u32::MAX {
+                    sphere_element[s as usize] = e as u32;
+                }
+            }
+        }
+        Ok(Self {
+            template,
+            jacobian: FootpointJacobian::new(template)?,
+            elements,
+            sphere_element,
+            pose,
+            posed,
+            geometry,
+            points: Vec::new(),
+            correspondences: Vec::new(),
+            directions: Vec::new(),
+            residuals: Vec::new(),
+            weights: Vec::new(),
+            reweighted: false,
+            rigid_only: false,
+            view,
+            front_facing: true,
+            irls,
+            sensor: SensorView::default(),
+            m2d: Some(M2dMode::Render),
+            renderer: DepthRenderer::new(),
+            hits: Vec::new(),
+            pushes: Vec::new(),
+        })
+    }
+
+    /// Take the points, camera, silhouette distance transform and wristband of a preprocessed
+    /// frame (reusing the buffers).
+    pub fn set_frame(&mut self, frame: &PreprocessedFrame) {
+        self.set_points(&frame.points);
+        self.sensor.set_frame(frame);
+    }
+
+    /// Replace the sensor points (camera frame, mm); correspondences are stale until the next
+    /// [`TrackingCtx::update`].
+    pub fn set_points(&mut self, points: &[Vector3<f64>]) {
+        let n = points.len();
+        self.points.clear();
+        self.points.extend_from_slice(points);
+        self.correspondences.clear();
+        self.correspondences.resize(n, None);
+        self.directions.clear();
+        self.directions.resize(n, Vector3::zeros());
+        self.residuals.clear();
+        self.residuals.resize(n, 0.0);
+        self.weights.clear();
+        self.weights.resize(n, 0.0);
+    }
+
+    /// The sensor data of the image-space terms.
+    pub fn sensor(&self) -> &SensorView {
+        &self.sensor
+    }
+
+    /// Mutable sensor data (tests and callers that build frames by hand).
+    pub fn sensor_mut(&mut self) -> &mut SensorView {
+        &mut self.sensor
+    }
+
+    /// Choose the model→data mode (`None`: no push constraints are computed).
+    pub fn set_m2d(&mut self, mode: Option<M2dMode>) {
+        self.m2d = mode;
+        if mode.is_none() {
+            self.pushes.clear();
+        }
+    }
+
+    /// The model→data mode.
+    pub fn m2d(&self) -> Option<M2dMode> {
+        self.m2d
+    }
+
+    /// Front-facing correspondences (Fig. 3.9, default) or plain closest points (Eq. 3.6).
+    pub fn set_front_facing(&mut self, front_facing: bool) {
+        self.front_facing = front_facing;
+    }
+
+    /// Re-pose the model at `pose` and recompute, for every sensor point, its correspondence
+    /// `q = Π_M(p)` (front-facing when enabled), the unit direction `u = (p − q)/‖p − q‖` of the
+    /// residual (the surface normal where `p` lies on the surface), the residual `r = uᵀ(q − p)
+    /// = −‖p − q‖` and its IRLS weight; then the push constraints of Eq. 3.5 when a sensor
+    /// camera is set. A pose of the wrong length is an error; a non-finite pose leaves no
+    /// correspondences and no pushes.
+    pub fn update(&mut self, pose: &Pose, rigid_only: bool) -> Result<(), TermError> {
+        let nd = self.template.skeleton.num_dofs();
+        if pose.values.len() != nd {
+            return Err(TermError::ShapeMismatch {
+                expected: nd,
+                found: pose.values.len(),
+            });
+        }
+        self.pose.values.clone_from(&pose.values);
+        self.rigid_only = rigid_only;
+        self.reweighted = self.irls.reweight && (!rigid_only || self.irls.reweight_rigid);
+        self.pushes.clear();
+        if !pose.values.iter().all(|v| v.is_finite()) {
+            self.correspondences.fill(None);
+            return Ok(());
+        }
+        self.posed.update(self.template, &self.pose);
+        if self.geometry.update(&self.posed.spheres).is_err() {
+            self.correspondences.fill(None);
+            return Err(TermError::Failed("posed spheres are not finite"));
+        }
+        if self.front_facing {
+            self.geometry
+                .project_points_front_facing(&self.points, &self.view, &mut self.correspondences);
+        } else {
+            self.geometry
+                .project_points(&self.points, &mut self.correspondences);
+        }
+        for (((c, p), u), (r, w)) in self
+            .correspondences
+            .iter()
+            .zip(&self.points)
+            .zip(self.directions.iter_mut())
+            .zip(self.residuals.iter_mut().zip(self.weights.iter_mut()))
+        {
+            let Some(c) = c else {
+                (*r, *w) = (0.0, 0.0);
+                continue;
+            };
+            let d = p - c.point;
+            let len = d.norm();
+            *u = if len > 1e-9 { d / len } else { c.normal };
+            *r = -len;
+            *w = if self.reweighted {
+                self.irls.weight(len)
+            } else {
+                1.0
+            };
+        }
+        self.update_pushes()
+    }
+
+    /// The push constraints of Eq. 3.5 at the current pose (see [`M2dMode`]).
+    fn update_pushes(&mut self) -> Result<(), TermError> {
+        let (Some(mode), Some(camera)) = (self.m2d, self.sensor.camera.as_ref()) else {
+            return Ok(());
+        };
+        let sensor = &self.sensor;
+        match mode {
+            M2dMode::Render => {
+                let nearest = &sensor.nearest;
+                let outside = |i: usize| nearest.get(i).is_none_or(|&n| n as usize != i);
+                self.renderer
+                    .render_hits(
+                        &intrinsics(camera),
+                        &self.posed.spheres,
+                        &self.elements,
+                        outside,
+                        &mut self.hits,
+                    )
+                    .map_err(|_| TermError::Failed("invalid sensor camera"))?;
+                for hit in &self.hits {
+                    let (u, v) = (hit.pixel % camera.width, hit.pixel / camera.width);
+                    let Some((nu, nv)) = sensor.nearest_pixel(u, v) else {
+                        continue;
+                    };
+                    let Some(pr) = self
+                        .geometry
+                        .project_on_element(hit.element as usize, &hit.point)
+                    else {
+                        continue;
+                    };
+                    self.pushes.push(SilhouettePush {
+                        element: hit.element,
+                        spheres: pr.spheres,
+                        weights: pr.weights,
+                        point: pr.point,
+                        target: Vector2::new(f64::from(nu), f64::from(nv)),
+                    });
+                }
+            }
+            M2dMode::Centers => {
+                for (i, s) in self.posed.spheres.iter().enumerate() {
+                    let e = self.sphere_element[i];
+                    if e == u32::MAX || s.center.z <= 0.0 {
+                        continue;
+                    }
+                    let px = camera.project(&s.center);
+                    let (u, v) = (px.x.round(), px.y.round());
+                    if !(u >= 0.0 && v >= 0.0) {
+                        continue;
+                    }
+                    let (u, v) = (u as u32, v as u32);
+                    if u >= camera.width || v >= camera.height || sensor.in_silhouette(u, v) {
+                        continue;
+                    }
+                    let Some((nu, nv)) = sensor.nearest_pixel(u, v) else {
+                        continue;
+                    };
+                    self.pushes.push(SilhouettePush {
+                        element: e,
+                        spheres: [i as u32; 3],
+                        weights: [1.0, 0.0, 0.0],
+                        point: s.center,
+                        target: Vector2::new(f64::from(nu), f64::from(nv)),
+                    });
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// The template.
+    pub fn template(&self) -> &'m SphereMeshTemplate {
+        self.template
+    }
+
+    /// The posed template at the last update.
+    pub fn posed_mesh(&self) -> &PosedSphereMesh {
+        &self.posed
+    }
+
+    /// The query geometry at the last update.
+    pub fn geometry(&self) -> &SphereMeshGeometry {
+        &self.geometry
+    }
+
+    /// The Jacobians of surface points.
+    pub fn jacobian(&self) -> &FootpointJacobian {
+        &self.jacobian
+    }
+
+    /// The sensor points.
+    pub fn points(&self) -> &[Vector3<f64>] {
+        &self.points
+    }
+
+    /// Per point its correspondence (`None`: non-finite point or pose).
+    pub fn correspondences(&self) -> &[Option<Projection>] {
+        &self.correspondences
+    }
+
+    /// Per point the unit residual direction `u`.
+    pub fn directions(&self) -> &[Vector3<f64>] {
+        &self.directions
+    }
+
+    /// Per point the residual `r = −‖p − q‖` (0 without correspondence).
+    pub fn residuals(&self) -> &[f64] {
+        &self.residuals
+    }
+
+    /// Per point the IRLS weight (1 on non-reweighted iterations, 0 without correspondence).
+    pub fn weights(&self) -> &[f64] {
+        &self.weights
+    }
+
+    /// Whether the weights are IRLS weights (energy: Huber-ℓ1) rather than 1 (energy: `Σ r²`).
+    pub fn reweighted(&self) -> bool {
+        self.reweighted
+    }
+
+    /// The IRLS settings.
+    pub fn irls(&self) -> &IrlsParams {
+        &self.irls
+    }
+
+    /// Whether the current iteration moves only the global DOFs.
+    pub fn rigid_only(&self) -> bool {
+        self.rigid_only
+    }
+
+    /// The push constraints of Eq. 3.5 at the last update.
+    pub fn pushes(&self) -> &[SilhouettePush] {
+        &self.pushes
+    }
+}
+
+impl PoseContext for TrackingCtx<'_> {
+    fn skeleton(&self) -> &Skeleton {
+        &self.template.skeleton
+    }
+    fn pose(&self) -> &Pose {
+        &self.pose
+    }
+    fn posed(&self) -> &PosedSkeleton {
+        &self.posed.skeleton
+    }
+}
+
+/// The [`LmCallback`] of the tracker: [`TrackingCtx::update`] before every iteration.
+#[derive(Copy, Clone, Debug, Default)]
+pub struct CorrespondenceCallback;
+
+impl LmCallback<TrackingCtx<'_>> for CorrespondenceCallback {
+    fn prepare(
+        &mut self,
+        pose: &Pose,
+        ctx: &mut TrackingCtx<'_>,
+        info: IterInfo,
+    ) -> Result<(), TermError> {
+        ctx.update(pose, info.rigid_only)
+    }
+}

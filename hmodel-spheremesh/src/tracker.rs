@@ -1,0 +1,429 @@
+//! The per-frame loop of the sphere-mesh tracker (thesis §3.3, Eq. 3.3): warm start from the
+//! previous frame, one rigid-only then full Levenberg–Marquardt iterations over the enabled
+//! terms (§3.6 "Reproducibility": 7 iterations; htrack/hmodel iterate 1 rigid + 7), temporal
+//! history, loss detection and re-initialization ([`hand_model::solver::FrameLoop`]), and the
+//! DESIGN.md record of every frame.
+
+use std::time::Instant;
+
+use hand_model::kinematics::Pose;
+use hand_model::query::View;
+use hand_model::solver::terms::{
+    JointLimits, JointLimitsParams, PosePrior, PosePriorParams, Temporal, TemporalParams,
+};
+use hand_model::solver::{
+    placement_directions, sphere_mesh_points, EnergyTerm, FrameLoop, FrameStats, IrlsParams,
+    IterInfo, LmCallback, LmError, LmOptions, LmSolver, LmWorkspace, LossParams,
+    NormalEquations, PcaPrior, TermError, TermStats, TrackingProblem,
+};
+use hand_model::spheremesh::{PosedSphereMesh, SphereMeshTemplate};
+use nalgebra::{Vector2, Vector3};
+use sensor_io::preprocess::PreprocessedFrame;
+use sensor_io::record::HandRecord;
+use serde::{Deserialize, Serialize};
+
+use crate::context::{CorrespondenceCallback, M2dMode, TrackingCtx};
+use crate::terms::{Collision, CollisionParams, D2m, D2mParams, M2d, M2dParams};
+
+/// Which terms of Eq. 3.3 take part (the `--no-<term>` switches of `hands track`).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct EnabledTerms {
+    /// E_d2m (Eq. 3.4). The thesis never disables it ("immediate loss of tracking").
+    pub d2m: bool,
+    /// E_m2d (Eq. 3.5); needs a sensor camera in the frame.
+    pub m2d: bool,
+    /// E_collision.
+    pub collision: bool,
+    /// E_pose (Eq. 2.5–2.6); needs a prior.
+    pub pose_prior: bool,
+    /// E_limits (Eq. 2.8).
+    pub joint_limits: bool,
+    /// E_temporal (Eq. 2.9).
+    pub temporal: bool,
+}
+
+impl Default for EnabledTerms {
+    fn default() -> Self {
+        Self {
+            d2m: true,
+            m2d: true,
+            collision: true,
+            pose_prior: true,
+            joint_limits: true,
+            temporal: true,
+        }
+    }
+}
+
+/// The camera model of the front-facing test (§3.3.1 "Monocular Correspondences").
+#[derive(Copy, Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum FrontFacingView {
+    /// The thesis: an orthographic camera looking along +z.
+    Orthographic,
+    /// The sensor's pinhole at the camera-frame origin (exact viewing rays; the silhouette is
+    /// still computed orthographically, toward the model's center).
+    Perspective,
+}
+
+impl FrontFacingView {
+    fn view(self) -> View {
+        match self {
+            Self::Orthographic => View::Orthographic(Vector3::z()),
+            Self::Perspective => View::Perspective {
+                camera_center: Vector3::zeros(),
+            },
+        }
+    }
+}
+
+/// Settings of the tracker, with the thesis defaults (§3.6 "Reproducibility").
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct TrackerConfig {
+    /// Levenberg–Marquardt: 1 rigid + 7 full iterations.
+    pub lm: LmOptions,
+    /// Front-facing correspondences (Fig. 3.9) rather than plain closest points.
+    pub front_facing: bool,
+    /// The camera of the front-facing test.
+    pub view: FrontFacingView,
+    /// ℓ1 by IRLS (as htrack/hmodel, ANCHOR-FACTS §5.3).
+    pub irls: IrlsParams,
+    /// How m2d finds the model outside the silhouette.
+    pub m2d_mode: M2dMode,
+    /// Which terms run.
+    pub enabled: EnabledTerms,
+    /// τ_d2m.
+    pub d2m: D2mParams,
+    /// τ_m2d.
+    pub m2d: M2dParams,
+    /// τ_collision.
+    pub collision: CollisionParams,
+    /// τ_pose and the form of the PCA prior.
+    pub pose_prior: PosePriorParams,
+    /// τ_limits.
+    pub joint_limits: JointLimitsParams,
+    /// Temporal weights.
+    pub temporal: TemporalParams,
+    /// Loss detection.
+    pub loss: LossParams,
+}
+
+impl Default for TrackerConfig {
+    fn default() -> Self {
+        Self {
+            lm: LmOptions {
+                iterations: 8,
+                rigid_iterations: 1,
+                final_evaluation: false,
+                ..LmOptions::default()
+            },
+            front_facing: true,
+            view: FrontFacingView::Perspective,
+            irls: IrlsParams::default(),
+            m2d_mode: M2dMode::Render,
+            enabled: EnabledTerms::default(),
+            d2m: D2mParams::default(),
+            m2d: M2dParams::default(),
+            collision: CollisionParams::default(),
+            pose_prior: PosePriorParams {
+                weight_projection: 1e4,
+                ..PosePriorParams::default()
+            },
+            joint_limits: JointLimitsParams::default(),
+            temporal: TemporalParams::default(),
+            loss: LossParams::default(),
+        }
+    }
+}
+
+/// Why a tracker could not be built.
+#[derive(Debug, thiserror::Error)]
+pub enum TrackerError {
+    /// Invalid solver options.
+    #[error("solver: {0}")]
+    Solver(#[from] LmError),
+    /// An invalid template, term settings or a prior that does not fit the template.
+    #[error("model: {0}")]
+    Model(#[from] hand_model::ModelError),
+}
+
+/// A term that adds nothing: fills the unused slots of the per-frame term list.
+struct NoTerm;
+
+impl EnergyTerm<TrackingCtx<'_>> for NoTerm {
+    fn name(&self) -> &'static str {
+        "none"
+    }
+    fn accumulate(&self, _: &TrackingCtx<'_>, _: &mut NormalEquations) -> Result<TermStats, TermError> {
+        Ok(TermStats::ZERO)
+    }
+}
+
+/// Most terms of one solve.
+const MAX_TERMS: usize = 8;
+
+/// The energy terms of Eq. 3.3, built once per sequence.
+struct Terms {
+    enabled: EnabledTerms,
+    d2m: D2m,
+    m2d: M2d,
+    collision: Collision,
+    limits: JointLimits,
+    temporal: Temporal,
+    prior: Option<PosePrior>,
+}
+
+impl Terms {
+    /// The enabled terms in hmodel's order (data first, the pose prior last) in a fixed array.
+    fn list<'s, 'm>(&'s self) -> ([&'s dyn EnergyTerm<TrackingCtx<'m>>; MAX_TERMS], usize) {
+        let mut out: [&dyn EnergyTerm<TrackingCtx<'m>>; MAX_TERMS] = [&NoTerm; MAX_TERMS];
+        let mut n = 0;
+        let e = &self.enabled;
+        let all: [(bool, &'s dyn EnergyTerm<TrackingCtx<'m>>); 5] = [
+            (e.d2m, &self.d2m),
+            (e.m2d, &self.m2d),
+            (e.collision, &self.collision),
+            (e.temporal, &self.temporal),
+            (e.joint_limits, &self.limits),
+        ];
+        for (on, t) in all {
+            if on {
+                out[n] = t;
+                n += 1;
+            }
+        }
+        if let (true, Some(p)) = (e.pose_prior, &self.prior) {
+            out[n] = p;
+            n += 1;
+        }
+        (out, n)
+    }
+}
+
+/// The timed [`CorrespondenceCallback`].
+struct TimedCallback {
+    correspondences_us: f64,
+}
+
+impl LmCallback<TrackingCtx<'_>> for TimedCallback {
+    fn prepare(&mut self, pose: &Pose, ctx: &mut TrackingCtx<'_>, info: IterInfo) -> Result<(), TermError> {
+        let t = Instant::now();
+        let r = CorrespondenceCallback.prepare(pose, ctx, info);
+        self.correspondences_us += t.elapsed().as_secs_f64() * 1e6;
+        r
+    }
+}
+
+/// The solve of one frame, as [`FrameLoop`] drives it.
+struct Problem<'m> {
+    ctx: TrackingCtx<'m>,
+    solver: LmSolver,
+    ws: LmWorkspace,
+    terms: Terms,
+    mean_pose: Pose,
+    correspondences_us: f64,
+    solve_us: f64,
+}
+
+impl TrackingProblem for Problem<'_> {
+    fn solve(&mut self, pose: &mut Pose) -> bool {
+        let (list, n) = self.terms.list();
+        let mut cb = TimedCallback {
+            correspondences_us: 0.0,
+        };
+        let t = Instant::now();
+        let sk = &self.ctx.template().skeleton;
+        let result = self
+            .solver
+            .solve(&mut self.ws, sk, pose, &mut self.ctx, &list[..n], &mut cb);
+        let total = t.elapsed().as_secs_f64() * 1e6;
+        self.correspondences_us += cb.correspondences_us;
+        self.solve_us += total - cb.correspondences_us;
+        let finite = pose.values.iter().all(|v| v.is_finite());
+        matches!(result, Ok(r) if r.termination.was_successful()) && finite
+    }
+
+    fn refresh(&mut self, pose: &Pose) -> bool {
+        self.ctx.update(pose, false).is_ok()
+    }
+
+    fn frame_stats(&self, params: &LossParams) -> FrameStats {
+        let d = self.ctx.residuals().iter().zip(self.ctx.correspondences()).map(|(r, c)| c.map(|_| r.abs()));
+        FrameStats::from_distances(d, params)
+    }
+
+    fn hypotheses(&self) -> Vec<Pose> {
+        let (centroid, dirs) = placement_directions(self.ctx.points());
+        let target = centroid + Vector3::new(0.0, 0.0, 10.0);
+        dirs.into_iter()
+            .filter_map(|e| self.placed_mean_pose(e, &target))
+            .collect()
+    }
+
+    fn clear_history(&mut self) {
+        self.terms.temporal.clear_history();
+    }
+}
+
+impl Problem<'_> {
+    /// The mean pose turned about the optical axis so that the fingers (+y) point along the
+    /// image direction `e`, with the centroid of the sphere centers on `target`.
+    fn placed_mean_pose(&self, e: Vector2<f64>, target: &Vector3<f64>) -> Option<Pose> {
+        let t = self.ctx.template();
+        let sk = &t.skeleton;
+        let mut pose = self.mean_pose.clone();
+        pose.set(sk, "global_rz", (-e.x).atan2(e.y)).ok()?;
+        let posed = PosedSphereMesh::new(t, &pose);
+        let n = posed.spheres.len();
+        if n == 0 {
+            return None;
+        }
+        let center = posed.spheres.iter().map(|s| s.center).sum::<Vector3<f64>>() / n as f64;
+        let shift = target - center;
+        for (name, d) in ["global_tx", "global_ty", "global_tz"].iter().zip(shift.iter()) {
+            let i = sk.dof_index(name)?;
+            pose.values[i] += d;
+        }
+        Some(pose)
+    }
+}
+
+/// The Ch. 3 sphere-mesh tracker: one per sequence (it holds the temporal history and the
+/// loss state).
+pub struct Tracker<'m> {
+    template: &'m SphereMeshTemplate,
+    config: TrackerConfig,
+    problem: Problem<'m>,
+    frames: FrameLoop,
+    posed: PosedSphereMesh,
+}
+
+impl<'m> Tracker<'m> {
+    /// A tracker of `template` with `config` and an optional PCA pose prior (E_pose is skipped
+    /// without one; its mean gives the initial finger pose).
+    pub fn new(
+        template: &'m SphereMeshTemplate,
+        config: TrackerConfig,
+        prior: Option<&PcaPrior>,
+    ) -> Result<Self, TrackerError> {
+        let sk = &template.skeleton;
+        let mut ctx = TrackingCtx::new(template, config.view.view(), config.irls.clone())?;
+        ctx.set_front_facing(config.front_facing);
+        ctx.set_m2d(config.enabled.m2d.then_some(config.m2d_mode));
+        let pose_prior = prior
+            .map(|p| PosePrior::new(sk, p, &config.pose_prior))
+            .transpose()?;
+        let num_aux = pose_prior.as_ref().map_or(0, PosePrior::num_aux);
+        let solver = LmSolver::new(sk, num_aux, config.lm.clone())?;
+        let ws = solver.workspace();
+        let mut mean_pose = Pose::zeros(sk);
+        for g in prior.iter().flat_map(|p| &p.groups) {
+            for (name, &m) in g.dofs.iter().zip(&g.mean) {
+                mean_pose.set(sk, name, m)?;
+            }
+        }
+        let terms = Terms {
+            enabled: config.enabled.clone(),
+            d2m: D2m::new(config.d2m.clone()),
+            m2d: M2d::new(config.m2d.clone()),
+            collision: Collision::new(template, config.collision.clone()),
+            limits: JointLimits::new(sk, &config.joint_limits),
+            temporal: Temporal::new(sphere_mesh_points(template), &config.temporal),
+            prior: pose_prior,
+        };
+        Ok(Self {
+            template,
+            frames: FrameLoop::new(mean_pose.clone(), config.loss.clone()),
+            posed: PosedSphereMesh::new(template, &mean_pose),
+            problem: Problem {
+                ctx,
+                solver,
+                ws,
+                terms,
+                mean_pose,
+                correspondences_us: 0.0,
+                solve_us: 0.0,
+            },
+            config,
+        })
+    }
+
+    /// The current pose θ.
+    pub fn pose(&self) -> &Pose {
+        &self.frames.pose
+    }
+
+    /// The settings.
+    pub fn config(&self) -> &TrackerConfig {
+        &self.config
+    }
+
+    /// The template.
+    pub fn template(&self) -> &'m SphereMeshTemplate {
+        self.template
+    }
+
+    /// The per-iteration context (correspondences and pushes at the last linearization).
+    pub fn context(&self) -> &TrackingCtx<'m> {
+        &self.problem.ctx
+    }
+
+    /// Start the next frame from `pose` instead of re-initializing; clears the temporal history.
+    pub fn set_pose(&mut self, pose: &Pose) -> Result<(), TrackerError> {
+        let checked = Pose::from_values(&self.template.skeleton, pose.values.clone())?;
+        self.frames.set_pose(checked);
+        self.problem.clear_history();
+        Ok(())
+    }
+
+    /// Track one preprocessed frame and return its DESIGN.md record (pose by DOF name, 21
+    /// keypoints, per-term energies of the last linearization, iterations, per-stage µs,
+    /// flags `no_hand`, `lost`, `reinitialized`, `solver_failed`). Never returns a non-finite
+    /// pose (see [`FrameLoop::step`]).
+    pub fn track(&mut self, frame: &PreprocessedFrame, index: u64, timestamp: f64) -> HandRecord {
+        let start = Instant::now();
+        let mut rec = HandRecord {
+            frame: index,
+            timestamp: if timestamp.is_finite() { timestamp } else { 0.0 },
+            ..HandRecord::default()
+        };
+        self.problem.correspondences_us = 0.0;
+        self.problem.solve_us = 0.0;
+        let n = frame.points.len();
+        if n >= self.frames.loss().min_points.max(1) {
+            self.problem.ctx.set_frame(frame);
+        }
+        let outcome = self.frames.step(&mut self.problem, n);
+        rec.flags = outcome.flags.iter().map(|f| f.to_string()).collect();
+        if let Some(stats) = &outcome.stats {
+            rec.iterations = Some(self.problem.ws.report().iterations as u32);
+            for t in &self.problem.ws.report().terms {
+                if t.energy.is_finite() {
+                    *rec.energies.entry(t.name.to_string()).or_default() += t.energy;
+                }
+            }
+            rec.energies.insert("mean_distance_mm".into(), stats.mean_distance);
+        }
+        let pose = &self.frames.pose;
+        self.posed.update(self.template, pose);
+        if outcome.stats.is_some() && self.config.enabled.temporal {
+            // Cannot fail: the term's points are on this template's bones.
+            let _ = self.problem.terms.temporal.push_frame(&self.posed.skeleton);
+        }
+        for (dof, v) in self.template.skeleton.dofs().iter().zip(&pose.values) {
+            rec.pose.insert(dof.name.clone(), *v);
+        }
+        rec.keypoints = self
+            .posed
+            .keypoints(self.template)
+            .iter()
+            .map(|k| [k.x, k.y, k.z])
+            .collect();
+        rec.timing_us.insert("correspondences".into(), self.problem.correspondences_us);
+        rec.timing_us.insert("solve".into(), self.problem.solve_us);
+        rec.timing_us.insert("track".into(), start.elapsed().as_secs_f64() * 1e6);
+        rec
+    }
+}
