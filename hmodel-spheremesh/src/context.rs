@@ -70,6 +70,7 @@ pub struct TrackingCtx<'m> {
     irls: IrlsParams,
     sensor: SensorView,
     m2d: Option<M2dMode>,
+    m2d_stride: u32,
     renderer: DepthRenderer,
     hits: Vec<PixelHit>,
     pushes: Vec<SilhouettePush>,
@@ -134,6 +135,7 @@ impl<'m> TrackingCtx<'m> {
             irls,
             sensor: SensorView::default(),
             m2d: Some(M2dMode::Render),
+            m2d_stride: 1,
             renderer: DepthRenderer::new(),
             hits: Vec::new(),
             pushes: Vec::new(),
@@ -184,6 +186,21 @@ impl<'m> TrackingCtx<'m> {
     /// The model→data mode.
     pub fn m2d(&self) -> Option<M2dMode> {
         self.m2d
+    }
+
+    /// Ray cast only every `stride`-th pixel along each image axis in [`M2dMode::Render`] (the
+    /// integral of Eq. 3.5 sampled on a coarser grid: each push then stands for `stride²`
+    /// pixels, see [`TrackingCtx::m2d_pixel_weight`]); 1 (the default) renders every pixel.
+    pub fn set_m2d_stride(&mut self, stride: u32) {
+        self.m2d_stride = stride.clamp(1, 16);
+    }
+
+    /// How many sensor pixels one push stands for (`stride²` when rendering, 1 for centers).
+    pub fn m2d_pixel_weight(&self) -> f64 {
+        match self.m2d {
+            Some(M2dMode::Render) => f64::from(self.m2d_stride * self.m2d_stride),
+            _ => 1.0,
+        }
     }
 
     /// Front-facing correspondences (Fig. 3.9, default) or plain closest points (Eq. 3.6).
@@ -258,7 +275,12 @@ impl<'m> TrackingCtx<'m> {
         match mode {
             M2dMode::Render => {
                 let nearest = &sensor.nearest;
-                let outside = |i: usize| nearest.get(i).is_none_or(|&n| n as usize != i);
+                let (w, stride) = (camera.width as usize, self.m2d_stride as usize);
+                let outside = |i: usize| {
+                    (i % w) % stride == 0
+                        && (i / w) % stride == 0
+                        && nearest.get(i).is_none_or(|&n| n as usize != i)
+                };
                 self.renderer
                     .render_hits(
                         &intrinsics(camera),

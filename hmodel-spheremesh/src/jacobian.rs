@@ -36,6 +36,10 @@ struct ElementJacobian {
     spheres: Vec<u32>,
     /// Per element sphere, its bone-attached parts.
     parts: Vec<Vec<Part>>,
+    /// Every sphere rides on a bone whose chain is all of `dofs` (a rigid element: one bone,
+    /// or spheres on bones with the same chain): then `∂q/∂θ_d` is the column of the skeleton
+    /// point `s = Σ w_i c_i` itself.
+    rigid: bool,
 }
 
 /// Per element, what moves its surface points (module docs).
@@ -106,10 +110,17 @@ impl FootpointJacobian {
                 }
                 parts.push(list);
             }
+            let full = if dofs.len() == 32 {
+                u32::MAX
+            } else {
+                (1u32 << dofs.len()) - 1
+            };
+            let rigid = parts.iter().flatten().all(|p| p.mask == full);
             elements.push(ElementJacobian {
                 dofs,
                 spheres,
                 parts,
+                rigid,
             });
         }
         Ok(Self { elements })
@@ -147,6 +158,26 @@ impl FootpointJacobian {
             return &[];
         };
         let k = ej.dofs.len();
+        let sk = &posed.skeleton;
+        if ej.rigid {
+            // Weights sum to 1 over the element's own spheres (blends included).
+            let mut p = Vector3::zeros();
+            let mut wsum = 0.0;
+            for (&s, &w) in spheres.iter().zip(weights) {
+                if w != 0.0 && ej.spheres.contains(&s) {
+                    p += posed.spheres[s as usize].center * w;
+                    wsum += w;
+                }
+            }
+            for (o, &d) in out.iter_mut().zip(&ej.dofs) {
+                *o = if wsum == 0.0 {
+                    Vector3::zeros()
+                } else {
+                    sk.column(d, &(p / wsum)) * wsum
+                };
+            }
+            return &ej.dofs[..k];
+        }
         let mut wsum = [0.0f64; MAX_ELEMENT_DOFS];
         let mut psum = [Vector3::zeros(); MAX_ELEMENT_DOFS];
         for (&s, &w) in spheres.iter().zip(weights) {
@@ -168,7 +199,6 @@ impl FootpointJacobian {
                 }
             }
         }
-        let sk = &posed.skeleton;
         for (j, &d) in ej.dofs.iter().enumerate() {
             out[j] = if wsum[j] == 0.0 {
                 Vector3::zeros()

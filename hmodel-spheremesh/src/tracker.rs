@@ -92,6 +92,8 @@ pub struct TrackerConfig {
     pub irls: IrlsParams,
     /// How m2d finds the model outside the silhouette.
     pub m2d_mode: M2dMode,
+    /// Pixel stride of the m2d rendering ([`TrackingCtx::set_m2d_stride`]).
+    pub m2d_stride: u32,
     /// Which terms run.
     pub enabled: EnabledTerms,
     /// τ_d2m.
@@ -123,6 +125,7 @@ impl Default for TrackerConfig {
             view: FrontFacingView::Perspective,
             irls: IrlsParams::default(),
             m2d_mode: M2dMode::Render,
+            m2d_stride: 1,
             enabled: EnabledTerms::default(),
             d2m: D2mParams::default(),
             m2d: M2dParams::default(),
@@ -312,6 +315,7 @@ impl<'m> Tracker<'m> {
         let mut ctx = TrackingCtx::new(template, config.view.view(), config.irls.clone())?;
         ctx.set_front_facing(config.front_facing);
         ctx.set_m2d(config.enabled.m2d.then_some(config.m2d_mode));
+        ctx.set_m2d_stride(config.m2d_stride);
         let pose_prior = prior
             .map(|p| PosePrior::new(sk, p, &config.pose_prior))
             .transpose()?;

@@ -61,7 +61,7 @@ impl EnergyTerm<TrackingCtx<'_>> for M2d {
         let Some(camera) = ctx.sensor().camera.as_ref() else {
             return Ok(TermStats::ZERO);
         };
-        let tau = self.params.weight;
+        let tau = self.params.weight * ctx.m2d_pixel_weight();
         let jac = ctx.jacobian();
         let posed = ctx.posed_mesh();
         let mut cols = [Vector3::zeros(); MAX_ELEMENT_DOFS];
