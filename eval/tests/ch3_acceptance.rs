@@ -70,7 +70,11 @@ fn teaser_noise_free() {
     assert_eq!(s.frames, 600);
     assert!(s.mean < 3.0, "mean keypoint error {} mm", s.mean);
     let under = run.fraction_max_under(10.0);
-    assert!(under >= 0.985, "{:.1}% of frames under 10 mm", 100.0 * under);
+    assert!(
+        under >= 0.985,
+        "{:.1}% of frames under 10 mm",
+        100.0 * under
+    );
 }
 
 #[test]
@@ -108,8 +112,12 @@ fn better_than_cylinders_on_every_motion() {
 fn leave_and_return_recovers() {
     let run = track("leave_reenter", "tof", 400);
     let no_hand = |i: usize| run.records[i].flags.iter().any(|f| f == "no_hand");
-    let gone = (0..run.records.len()).find(|&i| no_hand(i)).expect("the hand leaves the view");
-    let back = (gone..run.records.len()).find(|&i| !no_hand(i)).expect("the hand returns");
+    let gone = (0..run.records.len())
+        .find(|&i| no_hand(i))
+        .expect("the hand leaves the view");
+    let back = (gone..run.records.len())
+        .find(|&i| !no_hand(i))
+        .expect("the hand returns");
     let good = |i: usize| run.errors[i].is_some_and(|e| e.max < 20.0);
     let recovered = (back..run.records.len().saturating_sub(10)).find(|&i| (i..i + 10).all(good));
     let frames = recovered.map(|r| r - back);
@@ -117,6 +125,9 @@ fn leave_and_return_recovers() {
         "leave_reenter: away from frame {gone} to {back} ({} frames), recovered {frames:?} frames after the return",
         back - gone
     );
-    assert!(frames.is_some_and(|f| f <= 90), "recovery after {frames:?} frames");
+    assert!(
+        frames.is_some_and(|f| f <= 90),
+        "recovery after {frames:?} frames"
+    );
     assert!((gone..back).all(|i| run.records[i].is_finite()));
 }

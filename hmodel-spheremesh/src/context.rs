@@ -236,8 +236,11 @@ impl<'m> TrackingCtx<'m> {
             return Err(TermError::Failed("posed spheres are not finite"));
         }
         if self.front_facing {
-            self.geometry
-                .project_points_front_facing(&self.points, &self.view, &mut self.correspondences);
+            self.geometry.project_points_front_facing(
+                &self.points,
+                &self.view,
+                &mut self.correspondences,
+            );
         } else {
             self.geometry
                 .project_points(&self.points, &mut self.correspondences);

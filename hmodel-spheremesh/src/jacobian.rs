@@ -239,8 +239,8 @@ mod tests {
         let geo = SphereMeshGeometry::new(&posed.spheres, &elements).unwrap();
         let mut out = [Vector3::zeros(); MAX_ELEMENT_DOFS];
         let mut worst = 0.0f64;
-        for e in 0..elements.len() {
-            let c = posed.spheres[elements[e].spheres()[0] as usize].center;
+        for (e, el) in elements.iter().enumerate() {
+            let c = posed.spheres[el.spheres()[0] as usize].center;
             let p = c + Vector3::new(3.0, -20.0, 25.0);
             let pr = geo.project_on_element(e, &p).unwrap();
             let dofs = jac.columns(&posed, e, &pr.spheres, &pr.weights, &mut out);

@@ -14,7 +14,8 @@
 //!   [`hand_model::solver::terms`];
 //! - [`Tracker`]: warm start, 1 rigid + 7 LM iterations with the §3.6 weights
 //!   ([`TrackerConfig`]), loss detection and re-initialization
-//!   ([`hand_model::solver::FrameLoop`]), one DESIGN.md record per frame.
+//!   ([`hand_model::solver::FrameLoop`]), one DESIGN.md record per frame;
+//! - [`synthetic`]: frames rendered from a posed template for tests and benchmarks.
 //!
 //! # Example
 //! ```
@@ -34,6 +35,7 @@
 
 mod context;
 mod jacobian;
+pub mod synthetic;
 pub mod terms;
 #[cfg(test)]
 mod tests;

@@ -2,17 +2,15 @@
 
 use hand_model::kinematics::Pose;
 use hand_model::query::View;
-use hand_model::render::render_depth;
 use hand_model::solver::check::check_gradient;
 use hand_model::solver::{EnergyTerm, IrlsParams, PcaPrior};
 use hand_model::spheremesh::{default_right_hand, PosedSphereMesh, SphereMeshTemplate};
 use nalgebra::Vector3;
 use sensor_io::preprocess::PreprocessedFrame;
-use sensor_io::dt::DistanceTransform;
-use sensor_io::{Camera, Mask, SensorView};
+use sensor_io::{Camera, SensorView};
 
 use crate::terms::{Collision, CollisionParams, D2m, D2mParams, M2d, M2dParams};
-use crate::{intrinsics, M2dMode, Tracker, TrackerConfig, TrackingCtx};
+use crate::{M2dMode, Tracker, TrackerConfig, TrackingCtx};
 
 /// The hand 40 cm in front of the camera, palm toward it, a few fingers bent.
 pub(crate) fn test_pose(t: &SphereMeshTemplate) -> Pose {
@@ -32,21 +30,18 @@ pub(crate) fn test_pose(t: &SphereMeshTemplate) -> Pose {
     .unwrap()
 }
 
-/// Every `step`-th rendered pixel of the posed template, back-projected (camera frame, mm).
-pub(crate) fn rendered_points(t: &SphereMeshTemplate, pose: &Pose, step: usize) -> Vec<Vector3<f64>> {
-    let cam = Camera::sr300_qvga();
-    let posed = PosedSphereMesh::new(t, pose);
-    let elements: Vec<_> = t.elements.iter().map(|e| e.element).collect();
-    let r = render_depth(&intrinsics(&cam), &posed.spheres, &elements).unwrap();
-    let w = cam.width as usize;
-    (0..r.depth.len())
-        .filter(|&k| r.depth[k] > 0.0)
-        .step_by(step)
-        .map(|k| cam.backproject((k % w) as f64, (k / w) as f64, f64::from(r.depth[k])))
-        .collect()
+/// Up to `n` points of the posed template's visible surface (camera frame, mm).
+pub(crate) fn rendered_points(t: &SphereMeshTemplate, pose: &Pose, n: usize) -> Vec<Vector3<f64>> {
+    crate::synthetic::rendered_frame(t, pose, &Camera::sr300_qvga(), n)
+        .unwrap()
+        .points
 }
 
-fn gradient_error<T: for<'a> EnergyTerm<TrackingCtx<'a>>>(term: &T, ctx: &mut TrackingCtx<'_>, pose: &Pose) -> f64 {
+fn gradient_error<T: for<'a> EnergyTerm<TrackingCtx<'a>>>(
+    term: &T,
+    ctx: &mut TrackingCtx<'_>,
+    pose: &Pose,
+) -> f64 {
     let sk = &ctx.template().skeleton.clone();
     let nd = sk.num_dofs();
     let mut update = |p: &Pose, c: &mut TrackingCtx<'_>| c.update(p, false).unwrap();
@@ -62,7 +57,7 @@ fn d2m_gradient_matches_finite_differences() {
     let mut other = truth.clone();
     other.set(&t.skeleton, "index_mcp_flex", 0.6).unwrap();
     other.set(&t.skeleton, "global_tx", 3.0).unwrap();
-    let points = rendered_points(&t, &other, 7);
+    let points = rendered_points(&t, &other, 600);
     for reweight in [false, true] {
         let irls = IrlsParams {
             reweight,
@@ -72,7 +67,10 @@ fn d2m_gradient_matches_finite_differences() {
         ctx.set_front_facing(false);
         ctx.set_points(&points);
         let err = gradient_error(&D2m::new(D2mParams::default()), &mut ctx, &truth);
-        assert!(err < 1e-4, "reweight {reweight}: relative gradient error {err}");
+        assert!(
+            err < 1e-4,
+            "reweight {reweight}: relative gradient error {err}"
+        );
     }
 }
 
@@ -84,7 +82,8 @@ fn collision_gradient_matches_finite_differences() {
     pose.set(&t.skeleton, "index_mcp_abd", -0.35).unwrap();
     pose.set(&t.skeleton, "middle_mcp_abd", 0.3).unwrap();
     let term = Collision::new(&t, CollisionParams::default());
-    let mut ctx = TrackingCtx::new(&t, View::Orthographic(Vector3::z()), IrlsParams::default()).unwrap();
+    let mut ctx =
+        TrackingCtx::new(&t, View::Orthographic(Vector3::z()), IrlsParams::default()).unwrap();
     ctx.update(&pose, false).unwrap();
     let mut ne = hand_model::solver::NormalEquations::new(t.skeleton.num_dofs());
     let stats = term.accumulate(&ctx, &mut ne).unwrap();
@@ -97,7 +96,7 @@ fn collision_gradient_matches_finite_differences() {
 fn tracker_converges_from_a_perturbed_pose() {
     let t = default_right_hand();
     let truth = test_pose(&t);
-    let points = rendered_points(&t, &truth, 2);
+    let points = rendered_points(&t, &truth, 2500);
     let frame = PreprocessedFrame {
         points,
         ..PreprocessedFrame::default()
@@ -105,7 +104,12 @@ fn tracker_converges_from_a_perturbed_pose() {
     let prior = PcaPrior::project_default();
     let mut tracker = Tracker::new(&t, TrackerConfig::default(), Some(&prior)).unwrap();
     let mut start = truth.clone();
-    for (name, d) in [("global_tx", 6.0), ("global_rz", 0.1), ("index_mcp_flex", 0.2), ("middle_pip_flex", -0.2)] {
+    for (name, d) in [
+        ("global_tx", 6.0),
+        ("global_rz", 0.1),
+        ("index_mcp_flex", 0.2),
+        ("middle_pip_flex", -0.2),
+    ] {
         let i = t.skeleton.dof_index(name).unwrap();
         start.values[i] += d;
     }
@@ -121,28 +125,20 @@ fn tracker_converges_from_a_perturbed_pose() {
             .map(|(k, e)| (Vector3::from(*k) - e).norm())
             .sum::<f64>()
             / 21.0;
-        println!("frame {f}: mean keypoint error {err:.3} mm, flags {:?}", rec.flags);
+        println!(
+            "frame {f}: mean keypoint error {err:.3} mm, flags {:?}",
+            rec.flags
+        );
     }
     assert!(err < 1.0, "mean keypoint error {err} mm");
 }
 
 /// The sensor view whose silhouette is the template rendered at `pose`.
 fn silhouette_of(t: &SphereMeshTemplate, pose: &Pose) -> SensorView {
-    let cam = Camera::sr300_qvga();
-    let posed = PosedSphereMesh::new(t, pose);
-    let elements: Vec<_> = t.elements.iter().map(|e| e.element).collect();
-    let r = render_depth(&intrinsics(&cam), &posed.spheres, &elements).unwrap();
-    let mut mask = Mask::zeros(cam.width, cam.height);
-    for (m, &z) in mask.data.iter_mut().zip(&r.depth) {
-        *m = u8::from(z > 0.0);
-    }
-    let mut dt = DistanceTransform::default();
-    dt.compute(&mask);
-    SensorView {
-        camera: Some(cam),
-        nearest: dt.nearest,
-        wristband: None,
-    }
+    let frame = crate::synthetic::rendered_frame(t, pose, &Camera::sr300_qvga(), 1).unwrap();
+    let mut view = SensorView::default();
+    view.set_frame(&frame);
+    view
 }
 
 /// With the pushes of Eq. 3.5 held fixed (their spheres, weights, normal offset and target
@@ -158,7 +154,8 @@ fn m2d_rows_are_the_gauss_newton_linearization() {
     pose.values[sk.dof_index("global_tx").unwrap()] += 8.0;
     pose.values[sk.dof_index("index_mcp_abd").unwrap()] += 0.2;
     for mode in [M2dMode::Render, M2dMode::Centers] {
-        let mut ctx = TrackingCtx::new(&t, View::Orthographic(Vector3::z()), IrlsParams::default()).unwrap();
+        let mut ctx =
+            TrackingCtx::new(&t, View::Orthographic(Vector3::z()), IrlsParams::default()).unwrap();
         *ctx.sensor_mut() = silhouette_of(&t, &truth);
         ctx.set_m2d(Some(mode));
         ctx.update(&pose, false).unwrap();

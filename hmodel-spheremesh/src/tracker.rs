@@ -13,8 +13,8 @@ use hand_model::solver::terms::{
 };
 use hand_model::solver::{
     placement_directions, sphere_mesh_points, EnergyTerm, FrameLoop, FrameStats, IrlsParams,
-    IterInfo, LmCallback, LmError, LmOptions, LmSolver, LmWorkspace, LossParams,
-    NormalEquations, PcaPrior, TermError, TermStats, TrackingProblem,
+    IterInfo, LmCallback, LmError, LmOptions, LmSolver, LmWorkspace, LossParams, NormalEquations,
+    PcaPrior, TermError, TermStats, TrackingProblem,
 };
 use hand_model::spheremesh::{PosedSphereMesh, SphereMeshTemplate};
 use nalgebra::{Vector2, Vector3};
@@ -159,7 +159,11 @@ impl EnergyTerm<TrackingCtx<'_>> for NoTerm {
     fn name(&self) -> &'static str {
         "none"
     }
-    fn accumulate(&self, _: &TrackingCtx<'_>, _: &mut NormalEquations) -> Result<TermStats, TermError> {
+    fn accumulate(
+        &self,
+        _: &TrackingCtx<'_>,
+        _: &mut NormalEquations,
+    ) -> Result<TermStats, TermError> {
         Ok(TermStats::ZERO)
     }
 }
@@ -211,7 +215,12 @@ struct TimedCallback {
 }
 
 impl LmCallback<TrackingCtx<'_>> for TimedCallback {
-    fn prepare(&mut self, pose: &Pose, ctx: &mut TrackingCtx<'_>, info: IterInfo) -> Result<(), TermError> {
+    fn prepare(
+        &mut self,
+        pose: &Pose,
+        ctx: &mut TrackingCtx<'_>,
+        info: IterInfo,
+    ) -> Result<(), TermError> {
         let t = Instant::now();
         let r = CorrespondenceCallback.prepare(pose, ctx, info);
         self.correspondences_us += t.elapsed().as_secs_f64() * 1e6;
@@ -253,7 +262,12 @@ impl TrackingProblem for Problem<'_> {
     }
 
     fn frame_stats(&self, params: &LossParams) -> FrameStats {
-        let d = self.ctx.residuals().iter().zip(self.ctx.correspondences()).map(|(r, c)| c.map(|_| r.abs()));
+        let d = self
+            .ctx
+            .residuals()
+            .iter()
+            .zip(self.ctx.correspondences())
+            .map(|(r, c)| c.map(|_| r.abs()));
         FrameStats::from_distances(d, params)
     }
 
@@ -285,7 +299,10 @@ impl Problem<'_> {
         }
         let center = posed.spheres.iter().map(|s| s.center).sum::<Vector3<f64>>() / n as f64;
         let shift = target - center;
-        for (name, d) in ["global_tx", "global_ty", "global_tz"].iter().zip(shift.iter()) {
+        for (name, d) in ["global_tx", "global_ty", "global_tz"]
+            .iter()
+            .zip(shift.iter())
+        {
             let i = sk.dof_index(name)?;
             pose.values[i] += d;
         }
@@ -390,7 +407,11 @@ impl<'m> Tracker<'m> {
         let start = Instant::now();
         let mut rec = HandRecord {
             frame: index,
-            timestamp: if timestamp.is_finite() { timestamp } else { 0.0 },
+            timestamp: if timestamp.is_finite() {
+                timestamp
+            } else {
+                0.0
+            },
             ..HandRecord::default()
         };
         self.problem.correspondences_us = 0.0;
@@ -408,7 +429,8 @@ impl<'m> Tracker<'m> {
                     *rec.energies.entry(t.name.to_string()).or_default() += t.energy;
                 }
             }
-            rec.energies.insert("mean_distance_mm".into(), stats.mean_distance);
+            rec.energies
+                .insert("mean_distance_mm".into(), stats.mean_distance);
         }
         let pose = &self.frames.pose;
         self.posed.update(self.template, pose);
@@ -425,9 +447,11 @@ impl<'m> Tracker<'m> {
             .iter()
             .map(|k| [k.x, k.y, k.z])
             .collect();
-        rec.timing_us.insert("correspondences".into(), self.problem.correspondences_us);
+        rec.timing_us
+            .insert("correspondences".into(), self.problem.correspondences_us);
         rec.timing_us.insert("solve".into(), self.problem.solve_us);
-        rec.timing_us.insert("track".into(), start.elapsed().as_secs_f64() * 1e6);
+        rec.timing_us
+            .insert("track".into(), start.elapsed().as_secs_f64() * 1e6);
         rec
     }
 }

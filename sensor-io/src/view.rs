@@ -65,4 +65,3 @@ impl SensorView {
         (n != NO_PIXEL).then(|| (n % c.width, n / c.width))
     }
 }
-

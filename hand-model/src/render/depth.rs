@@ -196,15 +196,21 @@ impl DepthRenderer {
         out: &mut DepthRender,
     ) -> Result<()> {
         out.reset(intrinsics.width, intrinsics.height);
-        self.for_each_hit(intrinsics, spheres, elements, |_| true, |k, hit| {
-            out.depth[k] = hit.point.z as f32;
-            out.element[k] = hit.element as u32;
-            out.normal[k] = [
-                hit.normal.x as f32,
-                hit.normal.y as f32,
-                hit.normal.z as f32,
-            ];
-        })
+        self.for_each_hit(
+            intrinsics,
+            spheres,
+            elements,
+            |_| true,
+            |k, hit| {
+                out.depth[k] = hit.point.z as f32;
+                out.element[k] = hit.element as u32;
+                out.normal[k] = [
+                    hit.normal.x as f32,
+                    hit.normal.y as f32,
+                    hit.normal.z as f32,
+                ];
+            },
+        )
     }
 
     /// The pixels that see the model, as a list instead of an image (what the m2d term of

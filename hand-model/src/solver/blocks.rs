@@ -79,7 +79,9 @@ impl PackedBlocks {
             }
             let c = cols(i);
             if c.len() != usize::from(k) {
-                return Err(TermError::Failed("packed block width differs from its columns"));
+                return Err(TermError::Failed(
+                    "packed block width differs from its columns",
+                ));
             }
             ne.add_packed_block(c, &self.upper[i], &self.rhs[i])?;
         }

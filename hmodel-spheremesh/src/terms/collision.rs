@@ -57,7 +57,12 @@ pub struct PillContact {
 /// (1−t)∂b0 − t ∂b1)` (the axis tangents drop out by the optimality of free parameters, and a
 /// clamped parameter does not move); `∂s`, `∂t` of the free parameters follow from
 /// differentiating their optimality conditions `uᵀ(A − B) = 0`, `vᵀ(A − B) = 0`.
-pub fn pill_contact(a: [Vector3<f64>; 2], ra: [f64; 2], b: [Vector3<f64>; 2], rb: [f64; 2]) -> Option<PillContact> {
+pub fn pill_contact(
+    a: [Vector3<f64>; 2],
+    ra: [f64; 2],
+    b: [Vector3<f64>; 2],
+    rb: [f64; 2],
+) -> Option<PillContact> {
     let (u, v) = (a[1] - a[0], b[1] - b[0]);
     let (s, t) = segment_closest_params(&a[0], &u, &b[0], &v);
     let diff = (a[0] + u * s) - (b[0] + v * t);
@@ -69,18 +74,8 @@ pub fn pill_contact(a: [Vector3<f64>; 2], ra: [f64; 2], b: [Vector3<f64>; 2], rb
     let (dra, drb) = (ra[1] - ra[0], rb[1] - rb[0]);
     let penetration = ra[0] + dra * s + rb[0] + drb * t - d;
     // ∂F/∂endpoint for F = (uᵀdiff, −vᵀdiff), per endpoint (a0, a1, b0, b1).
-    let df1 = [
-        u * (1.0 - s) - diff,
-        diff + u * s,
-        -u * (1.0 - t),
-        -u * t,
-    ];
-    let df2 = [
-        -v * (1.0 - s),
-        -v * s,
-        diff + v * (1.0 - t),
-        v * t - diff,
-    ];
+    let df1 = [u * (1.0 - s) - diff, diff + u * s, -u * (1.0 - t), -u * t];
+    let df2 = [-v * (1.0 - s), -v * s, diff + v * (1.0 - t), v * t - diff];
     let free_s = s > 0.0 && s < 1.0;
     let free_t = t > 0.0 && t < 1.0;
     let h = Matrix2::new(u.dot(&u), -u.dot(&v), -u.dot(&v), v.dot(&v));
@@ -153,7 +148,8 @@ impl Collision {
                 if shares || adjacent {
                     continue;
                 }
-                let rest_overlap = contact_of(&rest, sa, sb).map_or(0.0, |c| c.penetration.max(0.0));
+                let rest_overlap =
+                    contact_of(&rest, sa, sb).map_or(0.0, |c| c.penetration.max(0.0));
                 pairs.push(PillPair {
                     a: ea,
                     b: eb,
@@ -226,9 +222,13 @@ impl EnergyTerm<TrackingCtx<'_>> for Collision {
         let mut stats = TermStats::ZERO;
         let mut pairs = [(0usize, 0.0f64); MAX_DOFS];
         for pair in &self.pairs {
-            let (Some(sa), Some(sb)) = (pill_spheres(template, pair.a), pill_spheres(template, pair.b))
-            else {
-                return Err(TermError::Failed("collision pair is not a pill of this template"));
+            let (Some(sa), Some(sb)) = (
+                pill_spheres(template, pair.a),
+                pill_spheres(template, pair.b),
+            ) else {
+                return Err(TermError::Failed(
+                    "collision pair is not a pill of this template",
+                ));
             };
             let Some(c) = contact_of(posed, sa, sb) else {
                 continue;
@@ -238,9 +238,14 @@ impl EnergyTerm<TrackingCtx<'_>> for Collision {
                 continue;
             }
             let mut row = [0.0f64; MAX_DOFS];
-            for (k, (e, s)) in [(pair.a, sa[0]), (pair.a, sa[1]), (pair.b, sb[0]), (pair.b, sb[1])]
-                .into_iter()
-                .enumerate()
+            for (k, (e, s)) in [
+                (pair.a, sa[0]),
+                (pair.a, sa[1]),
+                (pair.b, sb[0]),
+                (pair.b, sb[1]),
+            ]
+            .into_iter()
+            .enumerate()
             {
                 add_center_row(jac, posed, e, s, &c.gradient[k], &mut row);
             }
@@ -267,23 +272,29 @@ mod tests {
     fn pill_contact_gradient_matches_finite_differences() {
         let cases = [
             // crossing axes (both free)
-            ([Vector3::new(-10.0, 0.0, 0.0), Vector3::new(12.0, 1.0, 0.5)], [Vector3::new(0.5, -9.0, 6.0), Vector3::new(-1.0, 11.0, 7.0)]),
+            (
+                [Vector3::new(-10.0, 0.0, 0.0), Vector3::new(12.0, 1.0, 0.5)],
+                [Vector3::new(0.5, -9.0, 6.0), Vector3::new(-1.0, 11.0, 7.0)],
+            ),
             // end of one against the middle of the other (one clamped)
-            ([Vector3::new(0.0, 0.0, 0.0), Vector3::new(0.0, 20.0, 0.0)], [Vector3::new(-8.0, 26.0, 3.0), Vector3::new(9.0, 27.0, 4.0)]),
+            (
+                [Vector3::new(0.0, 0.0, 0.0), Vector3::new(0.0, 20.0, 0.0)],
+                [Vector3::new(-8.0, 26.0, 3.0), Vector3::new(9.0, 27.0, 4.0)],
+            ),
         ];
         for (a, b) in cases {
             let (ra, rb) = ([8.0, 6.0], [7.5, 5.0]);
             let c = pill_contact(a, ra, b, rb).unwrap();
             for k in 0..4 {
                 let fd = Vector3::from_fn(|i, _| {
-                        let f = |h: f64| {
-                            let (mut a, mut b) = (a, b);
-                            let p = if k < 2 { &mut a[k] } else { &mut b[k - 2] };
-                            p[i] += h;
-                            pill_contact(a, ra, b, rb).unwrap().penetration
-                        };
-                        (f(1e-6) - f(-1e-6)) / 2e-6
-                    });
+                    let f = |h: f64| {
+                        let (mut a, mut b) = (a, b);
+                        let p = if k < 2 { &mut a[k] } else { &mut b[k - 2] };
+                        p[i] += h;
+                        pill_contact(a, ra, b, rb).unwrap().penetration
+                    };
+                    (f(1e-6) - f(-1e-6)) / 2e-6
+                });
                 let err = relative_error(&fd, &c.gradient[k], 1e-3);
                 assert!(err < 1e-6, "endpoint {k}: fd {fd:?} vs {:?}", c.gradient[k]);
             }

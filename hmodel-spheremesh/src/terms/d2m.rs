@@ -1,8 +1,6 @@
 //! The data→model term E_d2m (thesis Eq. 3.4).
 
-use hand_model::solver::{
-    EnergyTerm, NormalEquations, PackedBlocks, TermError, TermStats,
-};
+use hand_model::solver::{EnergyTerm, NormalEquations, PackedBlocks, TermError, TermStats};
 use nalgebra::Vector3;
 use serde::{Deserialize, Serialize};
 
