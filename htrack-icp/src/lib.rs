@@ -60,6 +60,6 @@ mod tests_e2d;
 
 pub use context::{CorrespondenceCallback, TrackingCtx};
 pub use hand_model::solver::IrlsParams;
-pub use sensor_io::SensorView;
 pub use hand_model::solver::{FrameStats, LossParams};
+pub use sensor_io::SensorView;
 pub use tracker::{EnabledTerms, Tracker, TrackerConfig, TrackerError};

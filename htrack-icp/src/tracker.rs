@@ -24,8 +24,8 @@ use hand_model::solver::terms::{
     JointLimits, JointLimitsParams, PosePrior, PosePriorParams, Temporal, TemporalParams,
 };
 use hand_model::solver::{
-    cylinder_points, placement_directions, FrameStats, LossParams, EnergyTerm, IterInfo, LmCallback, LmError, LmOptions, LmSolver, LmWorkspace,
-    PcaPrior, TermError,
+    cylinder_points, placement_directions, EnergyTerm, FrameStats, IterInfo, LmCallback, LmError,
+    LmOptions, LmSolver, LmWorkspace, LossParams, PcaPrior, TermError,
 };
 use nalgebra::{Vector2, Vector3};
 use sensor_io::preprocess::PreprocessedFrame;
@@ -33,10 +33,10 @@ use sensor_io::record::HandRecord;
 use serde::{Deserialize, Serialize};
 
 use crate::context::{CorrespondenceCallback, TrackingCtx};
-use hand_model::solver::IrlsParams;
 use crate::terms::{
     Collision, CollisionParams, E2d, E2dParams, E3d, E3dParams, Wrist, WristParams,
 };
+use hand_model::solver::IrlsParams;
 
 /// Which terms of Eq. 2.1 take part (the `--no-<term>` switches of `hands track`).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -306,6 +306,12 @@ impl<'m> Tracker<'m> {
     /// The model.
     pub fn model(&self) -> &'m CylinderModel {
         self.model
+    }
+
+    /// The per-iteration context (sensor points and their correspondences at the last
+    /// linearization), for visual checks such as `hands track --overlay`.
+    pub fn context(&self) -> &TrackingCtx<'m> {
+        &self.ctx
     }
 
     /// Start the next frame from `pose` (e.g. a known initial pose) instead of
