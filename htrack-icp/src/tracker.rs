@@ -308,6 +308,12 @@ impl<'m> Tracker<'m> {
         self.model
     }
 
+    /// The per-iteration context (sensor points and their correspondences at the last
+    /// linearization), for visual checks such as `hands track --overlay`.
+    pub fn context(&self) -> &TrackingCtx<'m> {
+        &self.ctx
+    }
+
     /// Start the next frame from `pose` (e.g. a known initial pose) instead of
     /// re-initializing; clears the temporal history.
     pub fn set_pose(&mut self, pose: &Pose) -> Result<(), TrackerError> {

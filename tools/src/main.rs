@@ -4,11 +4,13 @@ mod convert;
 mod demo;
 mod interrupt;
 mod model;
+mod overlay;
 mod prior;
 mod progress;
 mod report;
 mod synth;
 mod track;
+mod trackers;
 
 use clap::{Parser, Subcommand};
 
@@ -44,7 +46,9 @@ enum Command {
     )]
     Synth(synth::SynthArgs),
     /// Track a depth sequence and write the per-frame pose, keypoints, energies and timings.
-    #[command(after_help = "Example: hands track seq.mcap --model cylinders --out track.jsonl")]
+    #[command(
+        after_help = "Example: hands track seq.mcap --model spheremesh --out track.jsonl --overlay overlay/"
+    )]
     Track(track::TrackArgs),
     /// Write a reproduction report (markdown + SVG plots) from synthetic ground truth.
     #[command(after_help = "Example: hands report ch2 --out docs/ch2 --frames 300")]

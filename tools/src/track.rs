@@ -7,34 +7,48 @@ use std::time::Instant;
 
 use anyhow::{bail, Context, Result};
 use clap::Args;
+use eval::markers::{frame_error, median};
 use hand_model::cylinder::{default_right_hand_cylinders, CylinderModel};
 use hand_model::solver::PcaPrior;
-use htrack_icp::{Tracker, TrackerConfig};
+use hand_model::spheremesh::SphereMeshTemplate;
+use hmodel_spheremesh::M2dMode;
 use sensor_io::io::{open_sequence, write_atomic, McapWriter, SequenceWriter, TRACK_TOPIC};
 use sensor_io::preprocess::{
     DepthOnlyParams, PreprocessConfig, PreprocessedFrame, Preprocessor, Segmentation,
     WristbandParams,
 };
-use sensor_io::record::HandRecord;
+use serde::de::DeserializeOwned;
+
+use crate::trackers::{CylinderTracker, FrameTracker, SphereMeshTracker};
 
 /// Track a sequence (folder or `.mcap`) frame by frame.
 ///
-/// Example: `hands track seq.mcap --model cylinders --out track.jsonl`
+/// Example: `hands track seq.mcap --model spheremesh --out track.jsonl --overlay overlay/`
 #[derive(Args)]
 pub struct TrackArgs {
     /// Input sequence: a folder or an `.mcap` file (see `hands synth`, `hands convert`).
     pub sequence: PathBuf,
-    /// Tracking model (the Ch. 2 cylinder tracker): `cylinders` (cylinders fitted to the default
-    /// sphere-mesh hand, with a wrist segment), `cylinders-htrack` (htrack's proportions, no
-    /// wrist), an htrack `.calib` file, a sphere-mesh template `.json` or `subject:<name>` (a
-    /// `hands synth` subject) — the last two give the cylinders fitted to that sphere-mesh.
+    /// Tracking model: `spheremesh` (the Ch. 3 sphere-mesh tracker on `--template`), or the
+    /// Ch. 2 cylinder tracker: `cylinders` (cylinders fitted to the default sphere-mesh hand,
+    /// with a wrist segment), `cylinders-htrack` (htrack's proportions, no wrist), an htrack
+    /// `.calib` file, a sphere-mesh template `.json` or `subject:<name>` (a `hands synth`
+    /// subject) — the last two give the cylinders fitted to that sphere-mesh.
     #[arg(long, default_value = "cylinders")]
     pub model: String,
+    /// Sphere-mesh template of `--model spheremesh`: a template `.json` or `subject:<name>`
+    /// (default: the default hand).
+    #[arg(long)]
+    pub template: Option<String>,
     /// Output: `.jsonl` (one JSON object per frame, DESIGN.md "Tracker output") or `.mcap` (the
     /// input frames plus the records on `/hand/track`, for Foxglove).
     #[arg(long)]
     pub out: PathBuf,
-    /// Tracker settings as JSON (any subset of the fields; the flags below override it).
+    /// Also write one PNG per frame into this folder: sensor depth in grey, the rendered model
+    /// tinted blue, sensor points colored by their model distance (green 0 mm → red ≥ 10 mm).
+    #[arg(long)]
+    pub overlay: Option<PathBuf>,
+    /// Tracker settings as JSON (any subset of the chosen tracker's fields; the flags below
+    /// override it).
     #[arg(long)]
     pub config: Option<PathBuf>,
     /// PCA pose prior: `project` (the project's own, embedded), a prior `.json` (`hands prior
@@ -51,21 +65,32 @@ pub struct TrackArgs {
     /// Track at most this many frames.
     #[arg(long)]
     pub frames: Option<usize>,
-    /// Plain closest-point correspondences instead of front-facing ones (Fig. 2.6).
+    /// Plain closest-point correspondences instead of front-facing ones (Fig. 2.6, 3.9).
     #[arg(long)]
     pub no_front_facing: bool,
     /// No rigid-only first iteration (Fig. 2.17).
     #[arg(long)]
     pub no_rigid_first: bool,
-    /// Disable the 3D point-to-model term (Eq. 2.2).
+    /// Cylinders: disable the 3D point-to-model term (Eq. 2.2).
     #[arg(long)]
     pub no_e3d: bool,
-    /// Disable the 2D silhouette term (Eq. 2.3).
+    /// Cylinders: disable the 2D silhouette term (Eq. 2.3).
     #[arg(long)]
     pub no_e2d: bool,
-    /// Disable the wristband term (Eq. 2.4).
+    /// Cylinders: disable the wristband term (Eq. 2.4).
     #[arg(long)]
     pub no_wrist: bool,
+    /// Sphere-mesh: disable the data→model term (Eq. 3.4; the thesis never does: tracking is
+    /// lost at once).
+    #[arg(long)]
+    pub no_d2m: bool,
+    /// Sphere-mesh: disable the model→data term (Eq. 3.5).
+    #[arg(long)]
+    pub no_m2d: bool,
+    /// Sphere-mesh: how E_m2d finds the model outside the silhouette: `render` (ray-cast the
+    /// model, §3.3.2) or `centers` (projected sphere centers, §3.6).
+    #[arg(long)]
+    pub m2d: Option<String>,
     /// Disable the collision term (Eq. 2.7).
     #[arg(long)]
     pub no_collision: bool,
@@ -80,7 +105,55 @@ pub struct TrackArgs {
     pub no_temporal: bool,
 }
 
-/// Load the tracking model named by `--model`.
+/// The model name that selects the Ch. 3 tracker.
+const SPHEREMESH: &str = "spheremesh";
+
+/// Reject the switches that the chosen tracker does not have, naming the model, rather than
+/// silently ignoring an ablation the user asked for.
+fn check_flags(args: &TrackArgs) -> Result<()> {
+    let spheremesh = args.model == SPHEREMESH;
+    let only_spheremesh = [
+        ("--template", args.template.is_some()),
+        ("--no-d2m", args.no_d2m),
+        ("--no-m2d", args.no_m2d),
+        ("--m2d", args.m2d.is_some()),
+    ];
+    let only_cylinders = [
+        ("--no-e3d", args.no_e3d),
+        ("--no-e2d", args.no_e2d),
+        ("--no-wrist", args.no_wrist),
+    ];
+    let (wrong, hint): (&[(&str, bool)], &str) = if spheremesh {
+        (&only_cylinders, "a cylinder model (`--model cylinders`)")
+    } else {
+        (&only_spheremesh, "`--model spheremesh`")
+    };
+    if let Some((flag, _)) = wrong.iter().find(|(_, set)| *set) {
+        bail!(
+            "{flag} does not apply to --model {}: it needs {hint}",
+            args.model
+        );
+    }
+    Ok(())
+}
+
+/// A sphere-mesh template: a template `.json` or `subject:<name>` (the `hands synth` subject of
+/// seed 7 applied to the default hand).
+fn load_sphere_mesh(spec: &str) -> Result<SphereMeshTemplate> {
+    if let Some(name) = spec.strip_prefix("subject:") {
+        let subject = datasets::subject_by_name(name, 7)?;
+        let base = hand_model::spheremesh::default_right_hand();
+        let basis = hand_model::spheremesh::ShapeBasis::honline(&base)?;
+        return Ok(basis.apply(&base, &subject.beta)?);
+    }
+    if spec.ends_with(".json") {
+        return SphereMeshTemplate::load(Path::new(spec))
+            .with_context(|| format!("loading the sphere-mesh template {spec}"));
+    }
+    bail!("unknown sphere-mesh template `{spec}`: use a template .json or subject:<name>")
+}
+
+/// Load the cylinder model named by `--model`.
 fn load_model(name: &str) -> Result<CylinderModel> {
     match name {
         "cylinders" => Ok(CylinderModel::from_sphere_mesh_with_wrist(
@@ -88,19 +161,11 @@ fn load_model(name: &str) -> Result<CylinderModel> {
         )?),
         "cylinders-htrack" => Ok(default_right_hand_cylinders()),
         p if p.ends_with(".calib") => Ok(hand_model::cylinder::load_htrack_calib(Path::new(p))?),
-        p if p.ends_with(".json") => {
-            let t = hand_model::spheremesh::SphereMeshTemplate::load(Path::new(p))?;
-            Ok(CylinderModel::from_sphere_mesh_with_wrist(&t)?)
-        }
-        p if p.starts_with("subject:") => {
-            let subject = datasets::subject_by_name(&p["subject:".len()..], 7)?;
-            let base = hand_model::spheremesh::default_right_hand();
-            let basis = hand_model::spheremesh::ShapeBasis::honline(&base)?;
-            Ok(CylinderModel::from_sphere_mesh_with_wrist(&basis.apply(&base, &subject.beta)?)?)
-        }
+        p if p.ends_with(".json") || p.starts_with("subject:") => Ok(
+            CylinderModel::from_sphere_mesh_with_wrist(&load_sphere_mesh(p)?)?,
+        ),
         other => bail!(
-            "unknown --model `{other}`: use `cylinders`, `cylinders-htrack`, an htrack .calib file, a sphere-mesh .json or subject:<name> (the sphere-mesh \
-             tracker is issue 5)"
+            "unknown --model `{other}`: use `spheremesh`, `cylinders`, `cylinders-htrack`, an htrack .calib file, a sphere-mesh .json or subject:<name>"
         ),
     }
 }
@@ -120,16 +185,21 @@ fn load_prior(spec: &str) -> Result<Option<PcaPrior>> {
     }
 }
 
-/// The tracker settings: defaults, then `--config`, then the switches.
-fn tracker_config(args: &TrackArgs) -> Result<TrackerConfig> {
-    let mut cfg: TrackerConfig = match &args.config {
+/// Tracker settings from `--config` (any subset of the fields), or the defaults.
+fn read_config<T: DeserializeOwned + Default>(path: Option<&Path>) -> Result<T> {
+    match path {
         Some(p) => {
             let text =
                 std::fs::read_to_string(p).with_context(|| format!("reading {}", p.display()))?;
-            serde_json::from_str(&text).with_context(|| format!("parsing {}", p.display()))?
+            serde_json::from_str(&text).with_context(|| format!("parsing {}", p.display()))
         }
-        None => TrackerConfig::default(),
-    };
+        None => Ok(T::default()),
+    }
+}
+
+/// The cylinder tracker settings: defaults, then `--config`, then the switches.
+fn cylinder_config(args: &TrackArgs) -> Result<htrack_icp::TrackerConfig> {
+    let mut cfg: htrack_icp::TrackerConfig = read_config(args.config.as_deref())?;
     cfg.front_facing &= !args.no_front_facing;
     if args.no_rigid_first {
         cfg.lm.rigid_iterations = 0;
@@ -138,6 +208,35 @@ fn tracker_config(args: &TrackArgs) -> Result<TrackerConfig> {
     e.e3d &= !args.no_e3d;
     e.e2d &= !args.no_e2d;
     e.wrist &= !args.no_wrist;
+    e.collision &= !args.no_collision;
+    e.pose_prior &= !args.no_pose_prior;
+    e.joint_limits &= !args.no_joint_limits;
+    e.temporal &= !args.no_temporal;
+    Ok(cfg)
+}
+
+/// The `--m2d` mode.
+fn m2d_mode(name: &str) -> Result<M2dMode> {
+    match name {
+        "render" => Ok(M2dMode::Render),
+        "centers" => Ok(M2dMode::Centers),
+        other => bail!("unknown --m2d `{other}`: use render or centers"),
+    }
+}
+
+/// The sphere-mesh tracker settings: defaults, then `--config`, then the switches.
+fn sphere_mesh_config(args: &TrackArgs) -> Result<hmodel_spheremesh::TrackerConfig> {
+    let mut cfg: hmodel_spheremesh::TrackerConfig = read_config(args.config.as_deref())?;
+    cfg.front_facing &= !args.no_front_facing;
+    if args.no_rigid_first {
+        cfg.lm.rigid_iterations = 0;
+    }
+    if let Some(m) = &args.m2d {
+        cfg.m2d_mode = m2d_mode(m)?;
+    }
+    let e = &mut cfg.enabled;
+    e.d2m &= !args.no_d2m;
+    e.m2d &= !args.no_m2d;
     e.collision &= !args.no_collision;
     e.pose_prior &= !args.no_pose_prior;
     e.joint_limits &= !args.no_joint_limits;
@@ -154,29 +253,6 @@ fn segmentation(name: &str) -> Result<Segmentation> {
     })
 }
 
-/// Median of a non-empty list (NaN for an empty one).
-fn median(mut v: Vec<f64>) -> f64 {
-    v.sort_by(f64::total_cmp);
-    v.get(v.len() / 2).copied().unwrap_or(f64::NAN)
-}
-
-/// Ground-truth keypoint errors of one frame: (mean, max) over the 21 keypoints (mm).
-fn keypoint_errors(track: &HandRecord, truth: &HandRecord) -> Option<(f64, f64)> {
-    if track.keypoints.len() != truth.keypoints.len() || truth.keypoints.is_empty() {
-        return None;
-    }
-    let d: Vec<f64> = track
-        .keypoints
-        .iter()
-        .zip(&truth.keypoints)
-        .map(|(a, b)| {
-            ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2) + (a[2] - b[2]).powi(2)).sqrt()
-        })
-        .collect();
-    let mean = d.iter().sum::<f64>() / d.len() as f64;
-    Some((mean, d.iter().copied().fold(0.0, f64::max)))
-}
-
 /// Run `hands track`.
 pub fn run(args: TrackArgs) -> Result<()> {
     let ext = args.out.extension().and_then(|e| e.to_str());
@@ -186,9 +262,29 @@ pub fn run(args: TrackArgs) -> Result<()> {
             args.out.display()
         );
     }
-    let model = load_model(&args.model)?;
+    check_flags(&args)?;
     let prior = load_prior(&args.prior)?;
-    let config = tracker_config(&args)?;
+    if args.model == SPHEREMESH {
+        let template = match &args.template {
+            Some(spec) => load_sphere_mesh(spec)?,
+            None => hand_model::spheremesh::default_right_hand(),
+        };
+        let config = sphere_mesh_config(&args)?;
+        let mut tracker = SphereMeshTracker::new(&template, config, prior.as_ref())?;
+        track_sequence(&args, &mut tracker)
+    } else {
+        let model = load_model(&args.model)?;
+        let config = cylinder_config(&args)?;
+        let mut tracker = CylinderTracker::new(&model, config, prior.as_ref())?;
+        track_sequence(&args, &mut tracker)
+    }
+}
+
+/// The frame loop shared by both trackers: read, preprocess, track, write (and overlay), with
+/// a progress bar, a partial write on Ctrl-C and a summary (timings, flags, ground-truth
+/// errors when the sequence has them).
+fn track_sequence(args: &TrackArgs, tracker: &mut dyn FrameTracker) -> Result<()> {
+    let ext = args.out.extension().and_then(|e| e.to_str());
     let mut reader = open_sequence(&args.sequence)
         .with_context(|| format!("opening {}", args.sequence.display()))?;
     let camera = reader.camera().clone();
@@ -205,7 +301,9 @@ pub fn run(args: TrackArgs) -> Result<()> {
             ..Default::default()
         })
     });
-    let mut tracker = Tracker::new(&model, config, prior.as_ref())?;
+    if let Some(dir) = &args.overlay {
+        std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+    }
     let total = match (reader.len(), args.frames) {
         (Some(n), Some(m)) => Some(n.min(m)),
         (n, m) => n.or(m),
@@ -247,11 +345,17 @@ pub fn run(args: TrackArgs) -> Result<()> {
         for f in &rec.flags {
             *flags.entry(f.clone()).or_default() += 1;
         }
-        if let Some(e) = truth.as_ref().and_then(|t| keypoint_errors(&rec, t)) {
+        if let Some(e) = truth
+            .as_ref()
+            .and_then(|t| frame_error(&rec.keypoints, &t.keypoints))
+        {
             errors.push(e);
         }
         if !rec.is_finite() {
             bail!("frame {frames}: the tracker produced a non-finite record (a bug)");
+        }
+        if let Some(dir) = &args.overlay {
+            write_overlay(dir, index, tracker, &frame_pre)?;
         }
         match mcap.as_mut() {
             Some(w) => w
@@ -277,9 +381,12 @@ pub fn run(args: TrackArgs) -> Result<()> {
         ""
     };
     eprintln!("tracked {frames} frames{note} → {}", args.out.display());
+    if let Some(dir) = &args.overlay {
+        eprintln!("overlays → {}", dir.display());
+    }
     let stages: Vec<String> = stage_us
         .into_iter()
-        .map(|(k, v)| format!("{k} {:.0}", median(v)))
+        .map(|(k, v)| format!("{k} {:.0}", median(&v)))
         .collect();
     eprintln!("median µs per frame: {}", stages.join(", "));
     if !flags.is_empty() {
@@ -288,12 +395,32 @@ pub fn run(args: TrackArgs) -> Result<()> {
     }
     if !errors.is_empty() {
         let n = errors.len() as f64;
-        let mean = errors.iter().map(|e| e.0).sum::<f64>() / n;
-        let under = errors.iter().filter(|e| e.1 < 25.0).count() as f64 / n;
+        let mean = errors.iter().map(|e| e.mean).sum::<f64>() / n;
+        let under = errors.iter().filter(|e| e.max < 25.0).count() as f64 / n;
         eprintln!(
             "ground truth: mean keypoint error {mean:.2} mm, {:.1}% of frames with max error < 25 mm",
             under * 100.0
         );
     }
     Ok(())
+}
+
+/// The overlay PNG of the frame just tracked (the model at the returned pose, the points'
+/// distances at the last linearization).
+fn write_overlay(
+    dir: &Path,
+    index: u64,
+    tracker: &mut dyn FrameTracker,
+    frame: &PreprocessedFrame,
+) -> Result<()> {
+    let camera = frame
+        .camera
+        .as_ref()
+        .context("the preprocessed frame has no camera (a bug)")?;
+    let distances = tracker.point_distances();
+    let pixels = tracker
+        .model_pixels(camera)
+        .with_context(|| format!("rendering the model of frame {index}"))?;
+    let image = crate::overlay::compose(frame, pixels, &distances);
+    crate::overlay::write(dir, index, &image)
 }
