@@ -41,8 +41,8 @@ pub struct ReportArgs {
 /// Run `hands report`.
 pub fn run(args: ReportArgs) -> Result<()> {
     anyhow::ensure!(
-        (8..=100_000).contains(&args.frames),
-        "--frames must be in 8..=100000, got {}",
+        (3..=100_000).contains(&args.frames),
+        "--frames must be in 3..=100000, got {}",
         args.frames
     );
     let out = args
