@@ -27,6 +27,25 @@ fn tmp(name: &str) -> PathBuf {
     d
 }
 
+/// `hands synth` of `frames` teaser frames into `seq` (a folder or an `.mcap`).
+fn synth_teaser(seq: &std::path::Path, frames: usize) {
+    let frames = frames.to_string();
+    let seq = seq.to_str().expect("utf8");
+    let (ok, text) = hands(&[
+        "synth", "--motion", "teaser", "--frames", &frames, "--out", seq,
+    ]);
+    assert!(ok, "{text}");
+}
+
+/// The records of a `track.jsonl`.
+fn read_records(path: &std::path::Path) -> Vec<serde_json::Value> {
+    std::fs::read_to_string(path)
+        .expect("track.jsonl")
+        .lines()
+        .map(|l| serde_json::from_str(l).expect("json line"))
+        .collect()
+}
+
 #[test]
 fn demo_runs_on_the_embedded_default() {
     let d = tmp("demo");
@@ -248,16 +267,7 @@ fn track_writes_one_record_per_frame_scored_against_truth() {
     let seq = d.join("seq.mcap");
     let out = d.join("track.jsonl");
     let s = |p: &PathBuf| p.to_str().expect("utf8").to_string();
-    let (ok, text) = hands(&[
-        "synth",
-        "--motion",
-        "teaser",
-        "--frames",
-        "12",
-        "--out",
-        &s(&seq),
-    ]);
-    assert!(ok, "{text}");
+    synth_teaser(&seq, 12);
     let (ok, text) = hands(&[
         "track",
         &s(&seq),
@@ -268,11 +278,7 @@ fn track_writes_one_record_per_frame_scored_against_truth() {
     ]);
     assert!(ok, "{text}");
     assert!(text.contains("ground truth: mean keypoint error"), "{text}");
-    let lines: Vec<serde_json::Value> = std::fs::read_to_string(&out)
-        .expect("track.jsonl")
-        .lines()
-        .map(|l| serde_json::from_str(l).expect("json line"))
-        .collect();
+    let lines = read_records(&out);
     assert_eq!(lines.len(), 12);
     for (i, l) in lines.iter().enumerate() {
         assert_eq!(l["frame"], i as u64);
@@ -352,4 +358,126 @@ fn report_ch2_runs_on_a_few_frames() {
     );
     let (ok, text) = hands(&["report", "ch9", "--out", d.to_str().expect("utf8")]);
     assert!(!ok && text.contains("ch9"), "{text}");
+}
+
+/// Issue 5 item 3: the sphere-mesh tracker from the CLI, with its per-frame overlays.
+#[test]
+fn track_spheremesh_writes_records_and_overlays() {
+    let d = tmp("track-sm");
+    let seq = d.join("seq");
+    let out = d.join("track.jsonl");
+    let overlay = d.join("overlay");
+    let s = |p: &PathBuf| p.to_str().expect("utf8").to_string();
+    synth_teaser(&seq, 4);
+    let (ok, text) = hands(&[
+        "track",
+        &s(&seq),
+        "--model",
+        "spheremesh",
+        "--template",
+        "subject:default",
+        "--no-collision",
+        "--m2d",
+        "centers",
+        "--out",
+        &s(&out),
+        "--overlay",
+        &s(&overlay),
+    ]);
+    assert!(ok, "{text}");
+    assert!(text.contains("ground truth: mean keypoint error"), "{text}");
+    let lines = read_records(&out);
+    assert_eq!(lines.len(), 4);
+    for l in &lines {
+        assert_eq!(l["keypoints"].as_array().expect("keypoints").len(), 21);
+        assert!(l["pose"]["index_mcp_flex"].is_number());
+        assert!(l["energies"]["d2m"].as_f64().expect("d2m") > 0.0);
+        assert!(l["energies"].get("collision").is_none(), "{l}");
+    }
+    for k in 0..4 {
+        let png = image::open(overlay.join(format!("{k:06}.png")))
+            .expect("overlay png")
+            .to_rgb8();
+        assert_eq!((png.width(), png.height()), (320, 240));
+        // The model tint (blue over grey) and the green of well-explained points are there.
+        assert!(png.pixels().any(|p| p.0[2] > p.0[0] + 40));
+        assert!(png
+            .pixels()
+            .any(|p| p.0 == [0, 255, 0] || p.0[1] > 200 && p.0[2] == 0));
+    }
+}
+
+#[test]
+fn track_rejects_switches_of_the_other_model() {
+    let d = tmp("track-flags");
+    let s = |p: &PathBuf| p.to_str().expect("utf8").to_string();
+    let out = s(&d.join("t.jsonl"));
+    let seq = s(&d);
+    for (args, needles) in [
+        (
+            vec!["--model", "spheremesh", "--no-e2d"],
+            ["--no-e2d", "spheremesh"],
+        ),
+        (vec!["--no-m2d"], ["--no-m2d", "cylinders"]),
+        (
+            vec![
+                "--model",
+                "cylinders-htrack",
+                "--template",
+                "subject:default",
+            ],
+            ["--template", "cylinders-htrack"],
+        ),
+        (
+            vec!["--model", "spheremesh", "--m2d", "bogus"],
+            ["--m2d", "bogus"],
+        ),
+        (
+            vec!["--model", "spheremesh", "--template", "missing.json"],
+            ["missing.json", "template"],
+        ),
+        (
+            vec!["--model", "spheremesh", "--template", "hand.obj"],
+            ["hand.obj", "subject:"],
+        ),
+    ] {
+        let mut all = vec!["track", seq.as_str(), "--out", out.as_str()];
+        all.extend(&args);
+        let (ok, text) = hands(&all);
+        assert!(!ok, "{args:?} accepted: {text}");
+        for n in needles {
+            assert!(text.contains(n), "{args:?}: {text}");
+        }
+        assert!(!text.contains("panicked"), "{args:?} panicked: {text}");
+    }
+}
+
+#[test]
+fn report_ch3_runs_on_a_few_frames() {
+    let d = tmp("report3");
+    let (ok, text) = hands(&[
+        "report",
+        "ch3",
+        "--frames",
+        "3",
+        "--out",
+        d.to_str().expect("utf8"),
+    ]);
+    assert!(ok, "{text}");
+    let md = std::fs::read_to_string(d.join("README.md")).expect("README.md");
+    for section in ["Fig. 3.11", "Fig. 3.12", "§3.6", "sphere centers"] {
+        assert!(md.contains(section), "{section} missing");
+    }
+    for svg in [
+        "selfeval-d2m",
+        "selfeval-m2d",
+        "selfeval-d2m-under",
+        "selfeval-m2d-under",
+        "selfeval-keypoints-under",
+        "models-under",
+        "framerate-under",
+    ] {
+        assert!(d.join(format!("{svg}.svg")).exists(), "{svg} missing");
+    }
+    assert!(md.contains("| `calibration` |"), "every motion is compared");
 }

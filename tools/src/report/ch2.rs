@@ -1,40 +1,22 @@
 //! `hands report ch2`: the reproduction report of thesis Ch. 2 — each ablation of §2.3–2.4 run
 //! on synthetic sequences with exact ground truth, scored by keypoint error, written as
-//! markdown + SVG plots. Every number in the report is measured by this command; the verdicts
-//! are computed from those numbers.
+//! markdown + SVG plots.
 
 use std::fmt::Write as _;
-use std::path::PathBuf;
+use std::path::Path;
 
-use anyhow::{Context, Result};
-use clap::Args;
-use eval::markers::{mean, under_curve, MarkerSummary};
-use eval::plot::{line_plot_svg, Series};
+use anyhow::Result;
+use eval::markers::mean;
 use eval::synthetic::{SyntheticRun, SyntheticSequence, SyntheticSpec};
 use hand_model::cylinder::CylinderModel;
 use hand_model::solver::terms::PosePriorForm;
 use hand_model::solver::PcaPrior;
-use hand_model::spheremesh::SphereMeshTemplate;
-use htrack_icp::{Tracker, TrackerConfig};
-use sensor_io::io::write_atomic;
+use htrack_icp::TrackerConfig;
 
-/// Write the Ch. 2 reproduction report.
-///
-/// Example: `hands report ch2 --out docs/ch2 --frames 300`
-#[derive(Args)]
-pub struct ReportArgs {
-    /// Which report: `ch2`.
-    pub which: String,
-    /// Output folder (README.md and SVG plots).
-    #[arg(long, default_value = "docs/ch2")]
-    pub out: PathBuf,
-    /// Frames per sequence.
-    #[arg(long, default_value_t = 300)]
-    pub frames: usize,
-    /// Seed of motions, subject and noise.
-    #[arg(long, default_value_t = 7)]
-    pub seed: u64,
-}
+use super::{
+    per_frame_plot, track_sequence, under_plot, verdict, ReportArgs, Tracked, OUTCOME_HEADER,
+};
+use crate::trackers::{CylinderTracker, FrameTracker};
 
 /// How a variant is scored.
 #[derive(Copy, Clone, Debug, PartialEq)]
@@ -159,16 +141,6 @@ fn experiments() -> Vec<Experiment> {
     ]
 }
 
-/// The tracking model of a synthetic subject: the cylinder model fitted to its sphere-mesh.
-fn tracking_model(template: &SphereMeshTemplate) -> Result<CylinderModel> {
-    Ok(CylinderModel::from_sphere_mesh_with_wrist(template)?)
-}
-
-/// The project's PCA pose prior.
-fn default_prior() -> Option<PcaPrior> {
-    Some(PcaPrior::project_default())
-}
-
 /// Keypoint acceleration error per frame (mm/frame²), averaged over keypoints.
 fn jitter(run: &SyntheticRun) -> Vec<f64> {
     let acc = |k: &[Vec<[f64; 3]>], t: usize, j: usize, c: usize| {
@@ -192,18 +164,16 @@ fn jitter(run: &SyntheticRun) -> Vec<f64> {
         .collect()
 }
 
-/// What one variant measured.
-struct Outcome {
-    label: &'static str,
-    summary: MarkerSummary,
-    score: f64,
-    lost: f64,
-    track_ms: f64,
-    per_frame: Vec<f64>,
-    maxes: Vec<f64>,
+/// The score of a variant (lower is better).
+fn score(metric: Metric, run: &SyntheticRun) -> f64 {
+    match metric {
+        Metric::KeypointError => run.summary().mean,
+        Metric::Jitter => mean(&jitter(run)),
+    }
 }
 
-fn run_variant(exp: &Experiment, v: &Variant, args: &ReportArgs) -> Result<Outcome> {
+/// Both variants of `exp` on one rendering of its sequence.
+fn run_experiment(exp: &Experiment, args: &ReportArgs) -> Result<Vec<Tracked>> {
     let spec = SyntheticSpec {
         motion: exp.motion.into(),
         frames: args.frames,
@@ -212,46 +182,21 @@ fn run_variant(exp: &Experiment, v: &Variant, args: &ReportArgs) -> Result<Outco
         ..SyntheticSpec::default()
     };
     let mut seq = SyntheticSequence::new(spec)?;
-    let model = tracking_model(seq.template())?;
-    let prior = default_prior();
-    let mut config = TrackerConfig::default();
-    (v.apply)(&mut config);
-    let mut tracker = Tracker::new(&model, config, prior.as_ref())?;
-    let bar = crate::progress::frames_bar(Some(args.frames), &format!("{} / {}", exp.id, v.label));
-    let run = seq.run(
-        |f, t| tracker.track(f, t.frame, t.timestamp),
-        |_| bar.inc(1),
-    )?;
-    bar.finish_and_clear();
-    let per_frame = run.mean_errors();
-    let score = match exp.metric {
-        Metric::KeypointError => run.summary().mean,
-        Metric::Jitter => mean(&jitter(&run)),
-    };
-    Ok(Outcome {
-        label: v.label,
-        summary: run.summary(),
-        score,
-        lost: run.flag_fraction("lost"),
-        track_ms: run.median_stage_us("track") / 1e3,
-        maxes: run.errors.iter().flatten().map(|e| e.max).collect(),
-        per_frame,
-    })
+    // The tracking model of a synthetic subject: the cylinder model fitted to its sphere-mesh.
+    let model = CylinderModel::from_sphere_mesh_with_wrist(seq.template())?;
+    let prior = PcaPrior::project_default();
+    let [a, b] = exp.variants.each_ref().map(|v| {
+        let mut config = TrackerConfig::default();
+        (v.apply)(&mut config);
+        CylinderTracker::new(&model, config, Some(&prior))
+    });
+    let (mut a, mut b) = (a?, b?);
+    let mut trackers: [&mut dyn FrameTracker; 2] = [&mut a, &mut b];
+    track_sequence(&mut seq, exp.id, &mut trackers, false)
 }
 
-/// Run `hands report`.
-pub fn run(args: ReportArgs) -> Result<()> {
-    anyhow::ensure!(
-        args.which == "ch2",
-        "unknown report `{}` (available: ch2)",
-        args.which
-    );
-    anyhow::ensure!(
-        (3..=100_000).contains(&args.frames),
-        "--frames must be in 3..=100000"
-    );
-    std::fs::create_dir_all(&args.out)
-        .with_context(|| format!("creating {}", args.out.display()))?;
+/// The Ch. 2 report (markdown), its plots written into `out`.
+pub fn write(args: &ReportArgs, out: &Path) -> Result<String> {
     let mut md = String::new();
     writeln!(
         md,
@@ -260,26 +205,19 @@ pub fn run(args: ReportArgs) -> Result<()> {
          segmentation, 2500 points); the tracker is `htrack-icp` with the cylinder model fitted to the \
          synthetic subject's sphere-mesh; errors are against the exact ground-truth keypoints (21 per frame). \
          Each verdict is computed from the numbers in its table.\n",
-        args.out.display(),
+        out.display(),
         args.frames,
         args.seed
     )?;
     for exp in experiments() {
-        let outcomes = exp
-            .variants
-            .iter()
-            .map(|v| run_variant(&exp, v, &args))
-            .collect::<Result<Vec<_>>>()?;
-        write_section(&mut md, &exp, &outcomes)?;
-        write_plots(&args, &exp, &outcomes)?;
+        let tracked = run_experiment(&exp, args)?;
+        write_section(&mut md, &exp, &tracked)?;
+        write_plots(out, &exp, &tracked)?;
     }
-    let path = args.out.join("README.md");
-    write_atomic(&path, md.as_bytes())?;
-    eprintln!("wrote {}", path.display());
-    Ok(())
+    Ok(md)
 }
 
-fn write_section(md: &mut String, exp: &Experiment, o: &[Outcome]) -> Result<()> {
+fn write_section(md: &mut String, exp: &Experiment, o: &[Tracked]) -> Result<()> {
     let unit = match exp.metric {
         Metric::KeypointError => "mean keypoint error (mm)",
         Metric::Jitter => "keypoint acceleration error (mm/frame²)",
@@ -291,103 +229,53 @@ fn write_section(md: &mut String, exp: &Experiment, o: &[Outcome]) -> Result<()>
     )?;
     writeln!(
         md,
-        "| variant | score | mean err (mm) | median err (mm) | frames max < 25 mm | lost frames | track ms/frame (median) |\n|---|---|---|---|---|---|---|"
+        "| variant | score | {OUTCOME_HEADER} |\n|---|---|---|---|---|---|---|"
     )?;
-    for x in o {
+    let scores: Vec<f64> = o.iter().map(|x| score(exp.metric, &x.run)).collect();
+    for ((v, x), s) in exp.variants.iter().zip(o).zip(&scores) {
         writeln!(
             md,
-            "| {} | {:.3} | {:.2} | {:.2} | {:.1}% | {:.1}% | {:.2} |",
-            x.label,
-            x.score,
-            x.summary.mean,
-            x.summary.median,
-            100.0 * x.summary.frac_max_under_25,
-            100.0 * x.lost,
-            x.track_ms
+            "| {} | {s:.3} | {} |",
+            v.label,
+            super::outcome_cells(&x.run)
         )?;
     }
-    let (a, b) = (&o[0], &o[1]);
-    // Below this relative difference a single synthetic sequence cannot separate the variants.
-    const MARGIN: f64 = 0.03;
-    let rel = (b.score - a.score) / b.score.abs().max(1e-12);
-    let verdict = if rel.abs() < MARGIN {
-        format!(
-            "**Inconclusive**: {} scores {:.3} vs {:.3} for {}, within {:.0}% of each other.",
-            a.label,
-            a.score,
-            b.score,
-            b.label,
-            100.0 * MARGIN
-        )
-    } else if a.score < b.score {
-        format!(
-            "**Reproduces**: {} scores {:.3} vs {:.3} for {} ({:.0}% lower).",
-            a.label,
-            a.score,
-            b.score,
-            b.label,
-            100.0 * (1.0 - a.score / b.score)
-        )
-    } else {
-        format!(
-            "**Does not reproduce** here: {} scores {:.3} vs {:.3} for {}.",
-            a.label, a.score, b.score, b.label
-        )
-    };
+    let (a, b) = (&exp.variants[0], &exp.variants[1]);
     writeln!(
         md,
-        "\n{verdict}\n\n![per-frame error]({id}-error.svg)\n![frames under ε]({id}-under.svg)\n",
+        "\n{}\n\n![per-frame error]({id}-error.svg)\n![frames under ε]({id}-under.svg)\n",
+        verdict(a.label, scores[0], b.label, scores[1]),
         id = exp.id
     )?;
     Ok(())
 }
 
-fn write_plots(args: &ReportArgs, exp: &Experiment, o: &[Outcome]) -> Result<()> {
-    let per_frame: Vec<Series> = o
+fn write_plots(out: &Path, exp: &Experiment, o: &[Tracked]) -> Result<()> {
+    let label = |i: usize| exp.variants[i].label.to_string();
+    let per_frame: Vec<(String, Vec<f64>)> = o
         .iter()
-        .map(|x| Series {
-            label: x.label.into(),
-            points: x
-                .per_frame
-                .iter()
-                .enumerate()
-                .map(|(i, &e)| (i as f64, e))
-                .collect(),
-        })
+        .enumerate()
+        .map(|(i, x)| (label(i), x.run.mean_errors()))
         .collect();
-    let svg = line_plot_svg(
+    per_frame_plot(
+        out,
+        &format!("{}-error", exp.id),
         &format!("{}: mean keypoint error per frame", exp.id),
-        "frame",
         "mm",
         &per_frame,
         Some(60.0),
     )?;
-    write_atomic(
-        &args.out.join(format!("{}-error.svg", exp.id)),
-        svg.as_bytes(),
-    )?;
-    let eps: Vec<f64> = (0..=50).map(f64::from).collect();
-    let under: Vec<Series> = o
+    let maxes: Vec<(String, Vec<f64>)> = o
         .iter()
-        .map(|x| Series {
-            label: x.label.into(),
-            points: eps
-                .iter()
-                .zip(under_curve(&x.maxes, &eps))
-                .map(|(&e, f)| (e, 100.0 * f))
-                .collect(),
-        })
+        .enumerate()
+        .map(|(i, x)| (label(i), x.max_errors()))
         .collect();
-    let svg = line_plot_svg(
+    under_plot(
+        out,
+        &format!("{}-under", exp.id),
         &format!("{}: % frames with max keypoint error < ε", exp.id),
         "ε (mm)",
-        "% frames",
-        &under,
-        None,
-    )?;
-    write_atomic(
-        &args.out.join(format!("{}-under.svg", exp.id)),
-        svg.as_bytes(),
-    )?;
-    Ok(())
+        50.0,
+        &maxes,
+    )
 }
