@@ -4,7 +4,7 @@
 //! Run with `cargo bench -p hand-model --bench projection`; divide the median by 2500 for ns/point.
 
 use criterion::{criterion_group, criterion_main, BatchSize, Criterion, Throughput};
-use hand_model::query::{Projection, SphereMeshGeometry, View};
+use hand_model::query::{Projection, SphereMeshGeometry, View, NO_SEED};
 use hand_model::shape::{Element, Sphere};
 use nalgebra::Vector3;
 use rand::{Rng, SeedableRng};
@@ -14,6 +14,10 @@ use std::hint::black_box;
 #[path = "support/hand_like.rs"]
 mod hand_like;
 use hand_like::hand_like_geometry;
+
+#[path = "support/rendered.rs"]
+mod rendered;
+use rendered::{rendered_scenes, RenderedScene};
 
 const POINTS: usize = 2500;
 
@@ -116,5 +120,160 @@ fn bench_projection(c: &mut Criterion) {
     });
 }
 
-criterion_group!(benches, bench_projection);
+/// One rendered frame prepared for the benchmark.
+struct Frame {
+    geometry: SphereMeshGeometry,
+    points: Vec<Vector3<f64>>,
+    /// The elements of the answers at the previous pose ([`RenderedScene::previous`]): what a
+    /// tracker's seeds hold at a new solver iteration. Plain and per view.
+    seeds_plain: Vec<u32>,
+    seeds_front_facing: [Vec<u32>; 2],
+}
+
+/// The views of the rendered frames: the thesis' orthographic approximation and the exact
+/// pinhole camera at the origin.
+const RENDERED_VIEWS: [(&str, View); 2] = [
+    (
+        "orthographic",
+        View::Orthographic(Vector3::new(0.0, 0.0, 1.0)),
+    ),
+    (
+        "perspective",
+        View::Perspective {
+            camera_center: Vector3::new(0.0, 0.0, 0.0),
+        },
+    ),
+];
+
+fn frame(scene: &RenderedScene, input: &str, points: &[Vector3<f64>]) -> Frame {
+    let geometry = SphereMeshGeometry::new(&scene.spheres, &scene.elements).expect("valid hand");
+    let previous = SphereMeshGeometry::new(&scene.previous, &scene.elements).expect("valid hand");
+    let mut out = vec![None; points.len()];
+    let mut seeds_plain = vec![NO_SEED; points.len()];
+    previous.project_points_seeded(points, &mut seeds_plain, &mut out);
+    let seeds_front_facing = RENDERED_VIEWS.map(|(_, view)| {
+        let mut seeds = vec![NO_SEED; points.len()];
+        previous.project_points_front_facing_seeded(points, &view, &mut seeds, &mut out);
+        seeds
+    });
+    let back_facing = RENDERED_VIEWS.map(|(_, view)| {
+        geometry.project_points(points, &mut out);
+        out.iter()
+            .flatten()
+            .filter(|q| view.is_back_facing(&q.point, &q.normal))
+            .count()
+    });
+    eprintln!(
+        "rendered {:>12} ({}): {} points, back-facing plain footpoints: {} orthographic, {} perspective",
+        scene.name,
+        input,
+        points.len(),
+        back_facing[0],
+        back_facing[1]
+    );
+    Frame {
+        geometry,
+        points: points.to_vec(),
+        seeds_plain,
+        seeds_front_facing,
+    }
+}
+
+/// The realistic case: the rendered frames of `support/rendered.rs` (4 poses, 2500 points
+/// each), clean and with noise along the rays; one iteration projects every frame once, so a
+/// call costs the median / 4. Seeded variants start from the answers at a slightly different
+/// pose (a previous solver iteration); the seed buffers are reset outside the timing.
+fn bench_rendered(c: &mut Criterion) {
+    let scenes = rendered_scenes();
+    let inputs = [
+        (
+            "clean",
+            scenes
+                .iter()
+                .map(|s| frame(s, "clean", &s.points))
+                .collect::<Vec<_>>(),
+        ),
+        (
+            "noisy",
+            scenes.iter().map(|s| frame(s, "noisy", &s.noisy)).collect(),
+        ),
+    ];
+    let mut group = c.benchmark_group("rendered_4x2500");
+    for (input, frames) in inputs {
+        let mut outs: Vec<Vec<Option<Projection>>> =
+            frames.iter().map(|f| vec![None; f.points.len()]).collect();
+        let total: usize = frames.iter().map(|f| f.points.len()).sum();
+        group.throughput(Throughput::Elements(total as u64));
+        group.bench_function(format!("{input}/baseline_all_elements"), |b| {
+            b.iter(|| {
+                for (f, out) in frames.iter().zip(outs.iter_mut()) {
+                    let g = &f.geometry;
+                    for (p, o) in black_box(&f.points).iter().zip(out.iter_mut()) {
+                        *o = (0..g.elements().len())
+                            .filter_map(|e| g.project_on_element(e, p))
+                            .min_by(|a, b| a.distance.total_cmp(&b.distance));
+                    }
+                }
+            })
+        });
+        group.bench_function(format!("{input}/plain"), |b| {
+            b.iter(|| {
+                for (f, out) in frames.iter().zip(outs.iter_mut()) {
+                    f.geometry.project_points(black_box(&f.points), out);
+                }
+            })
+        });
+        group.bench_function(format!("{input}/plain_seeded"), |b| {
+            b.iter_batched_ref(
+                || {
+                    frames
+                        .iter()
+                        .map(|f| f.seeds_plain.clone())
+                        .collect::<Vec<_>>()
+                },
+                |seeds| {
+                    for ((f, s), out) in frames.iter().zip(seeds.iter_mut()).zip(outs.iter_mut()) {
+                        f.geometry
+                            .project_points_seeded(black_box(&f.points), s, out);
+                    }
+                },
+                BatchSize::SmallInput,
+            )
+        });
+        for (v, (name, view)) in RENDERED_VIEWS.iter().enumerate() {
+            group.bench_function(format!("{input}/front_facing_{name}"), |b| {
+                b.iter(|| {
+                    for (f, out) in frames.iter().zip(outs.iter_mut()) {
+                        f.geometry
+                            .project_points_front_facing(black_box(&f.points), view, out);
+                    }
+                })
+            });
+            group.bench_function(format!("{input}/front_facing_{name}_seeded"), |b| {
+                b.iter_batched_ref(
+                    || {
+                        let seeds = frames.iter().map(|f| f.seeds_front_facing[v].clone());
+                        seeds.collect::<Vec<_>>()
+                    },
+                    |seeds| {
+                        for ((f, s), out) in
+                            frames.iter().zip(seeds.iter_mut()).zip(outs.iter_mut())
+                        {
+                            f.geometry.project_points_front_facing_seeded(
+                                black_box(&f.points),
+                                view,
+                                s,
+                                out,
+                            );
+                        }
+                    },
+                    BatchSize::SmallInput,
+                )
+            });
+        }
+    }
+    group.finish();
+}
+
+criterion_group!(benches, bench_projection, bench_rendered);
 criterion_main!(benches);

@@ -106,3 +106,100 @@ fn circumcenter(a: &Vector3<f64>, b: &Vector3<f64>, c: &Vector3<f64>) -> Option<
     let offset = (n.cross(&ab) * ac.norm_squared() + ac.cross(&n) * ab.norm_squared()) / (2.0 * n2);
     Some(a + offset)
 }
+
+/// Elements per block of [`BallBlocks`]: one mask per block, two SSE (or one AVX) vectors wide.
+pub(crate) const BLOCK: usize = 8;
+
+/// The elements' bounding balls as `f32` structure-of-arrays blocks, for a vectorised first
+/// culling pass: one block of [`BLOCK`] balls is tested against a query at once, and only the
+/// survivors go through the exact `f64` test. In `f32`, coordinates of a hand 400 mm from the
+/// camera would carry 3·10⁻⁵ mm of rounding, so they are stored relative to `origin` (the
+/// center of the model's bounding ball) and the test is widened by a margin far above the
+/// rounding: the pass only ever keeps more elements than the exact test, never fewer.
+#[derive(Clone, Debug, Default)]
+pub(crate) struct BallBlocks {
+    origin: Vector3<f64>,
+    /// `max_e (‖C_e − origin‖_∞ + R_e)`: with the query's offset, it bounds every magnitude
+    /// entering the test, hence its rounding.
+    extent: f64,
+    /// Per block: x, y, z of the centers relative to `origin`, and the radii. Padding lanes have
+    /// radius −∞ and never survive.
+    blocks: Vec<[[f32; BLOCK]; 4]>,
+}
+
+/// A query point prepared for [`BallBlocks::survivors`].
+#[derive(Copy, Clone, Debug)]
+pub(crate) struct BlockQuery {
+    p: [f32; 3],
+    /// Widening of the test: a relative 10⁻⁵ of the magnitudes involved, about ten times the
+    /// worst `f32` rounding of the distance and of `best + R`.
+    margin_scale: f64,
+}
+
+impl BallBlocks {
+    /// Blocks for `balls`; sized once, refreshed by [`refit`](Self::refit) without allocating.
+    pub(crate) fn new(balls: &[BoundingBall], origin: Vector3<f64>) -> Self {
+        let mut b = Self {
+            blocks: vec![[[0.0; BLOCK]; 4]; balls.len().div_ceil(BLOCK)],
+            ..Self::default()
+        };
+        b.refit(balls, origin);
+        b
+    }
+
+    /// Stores `balls` (same count as at construction) relative to `origin`.
+    pub(crate) fn refit(&mut self, balls: &[BoundingBall], origin: Vector3<f64>) {
+        self.origin = origin;
+        self.extent = 0.0;
+        for (k, block) in self.blocks.iter_mut().enumerate() {
+            for (lane, ball) in (0..BLOCK).map(|lane| (lane, balls.get(k * BLOCK + lane))) {
+                let (c, r) = match ball {
+                    Some(ball) => {
+                        let c = ball.center - origin;
+                        self.extent = self.extent.max(c.abs().max() + ball.radius);
+                        (c, ball.radius)
+                    }
+                    None => (Vector3::zeros(), f64::NEG_INFINITY),
+                };
+                block[0][lane] = c.x as f32;
+                block[1][lane] = c.y as f32;
+                block[2][lane] = c.z as f32;
+                block[3][lane] = r as f32;
+            }
+        }
+    }
+
+    /// Number of blocks (element `e` is lane `e % BLOCK` of block `e / BLOCK`).
+    pub(crate) fn len(&self) -> usize {
+        self.blocks.len()
+    }
+
+    /// Prepares the query point `p`.
+    #[inline]
+    pub(crate) fn query(&self, p: &Vector3<f64>) -> BlockQuery {
+        let rel = p - self.origin;
+        BlockQuery {
+            p: [rel.x as f32, rel.y as f32, rel.z as f32],
+            margin_scale: 1e-5 * (rel.abs().max() + self.extent),
+        }
+    }
+
+    /// Bit `k` set for every lane `k` of block `block` whose ball may satisfy
+    /// `‖p − C‖ − R ≤ best`: a superset of the elements that the exact test keeps. Overflow to
+    /// infinities or NaN (coordinates near `f32::MAX`) keeps the lane.
+    #[inline]
+    pub(crate) fn survivors(&self, q: &BlockQuery, block: usize, best: f64) -> u32 {
+        let [x, y, z, r] = &self.blocks[block];
+        let reach = (best + q.margin_scale + 1e-5 * best.abs()) as f32;
+        // Written lane-wise into an array of bits (not as a running mask) so that it compiles to
+        // packed compares on baseline x86-64.
+        let mut bits = [0u32; BLOCK];
+        for (lane, bit) in bits.iter_mut().enumerate() {
+            let (dx, dy, dz) = (q.p[0] - x[lane], q.p[1] - y[lane], q.p[2] - z[lane]);
+            let t = reach + r[lane];
+            let keep = !(t <= 0.0) & !(dx * dx + dy * dy + dz * dz > t * t);
+            *bit = if keep { 1 << lane } else { 0 };
+        }
+        bits.iter().fold(0, |mask, bit| mask | bit)
+    }
+}

@@ -40,7 +40,7 @@ use super::geometry::{ElementFrame, SphereMeshGeometry};
 use super::point_wedge::WedgeFrame;
 use super::silhouette::ViewBasis;
 use super::union_silhouette::UnionSilhouette;
-use super::{is_usable, Part, Projection, View};
+use super::{is_usable, Part, Projection, View, NO_SEED};
 use nalgebra::Vector3;
 
 /// The merge test of the thesis's silhouette computation (§3.3.1: discard `v` with
@@ -65,9 +65,9 @@ impl SphereMeshGeometry {
     /// holds. `None` for a non-finite point, an invalid view (zero or non-finite direction or
     /// camera center) or a model without elements.
     ///
-    /// A back-facing point costs a silhouette computation for the whole model: for many points
-    /// use [`project_points_front_facing`](Self::project_points_front_facing), which computes it
-    /// once and returns the same results.
+    /// A back-facing point costs the clipping of the silhouette pieces near it: for many points
+    /// use [`project_points_front_facing`](Self::project_points_front_facing), which clips each
+    /// piece at most once per batch and returns the same results.
     pub fn project_front_facing(&self, p: &Vector3<f64>, view: &View) -> Option<Projection> {
         let mut out = [None];
         self.project_points_front_facing(core::slice::from_ref(p), view, &mut out);
@@ -76,8 +76,9 @@ impl SphereMeshGeometry {
 
     /// [`project_front_facing`](Self::project_front_facing) (Fig. 3.9) for many points, e.g. the
     /// data points of one frame, writing into `out` (same length as `points`). Allocates
-    /// nothing: the object-space silhouette (Fig. 3.10) is computed once for the batch (only if
-    /// some footpoint is back-facing) in a buffer on the stack (under 64 KiB). `None` entries for
+    /// nothing: the object-space silhouette (Fig. 3.10) is set up once for the batch (only if
+    /// some footpoint is back-facing) in a buffer on the stack (under 64 KiB), and each of its
+    /// pieces is clipped at most once, when a back-facing point first reaches it. `None` entries for
     /// non-finite points; all `None` for an invalid view.
     ///
     /// # Panics
@@ -89,27 +90,65 @@ impl SphereMeshGeometry {
         view: &View,
         out: &mut [Option<Projection>],
     ) {
+        self.front_facing_batch(points, view, None, out);
+    }
+
+    /// [`project_points_front_facing`](Self::project_points_front_facing) with temporal
+    /// coherence, as [`project_points_seeded`](Self::project_points_seeded) for the plain
+    /// projection: `seeds[i]` names the element to start the plain search of `points[i]` from
+    /// (the element of its previous answer; [`NO_SEED`](super::NO_SEED) or any out-of-range
+    /// value for none), and on return holds the element of `out[i]` (`NO_SEED` for `None`).
+    ///
+    /// `out` is bit for bit what the unseeded call returns, whatever the seeds. Allocates
+    /// nothing.
+    ///
+    /// # Panics
+    /// If `out` or `seeds` is not as long as `points`.
+    #[track_caller]
+    pub fn project_points_front_facing_seeded(
+        &self,
+        points: &[Vector3<f64>],
+        view: &View,
+        seeds: &mut [u32],
+        out: &mut [Option<Projection>],
+    ) {
+        assert_eq!(points.len(), seeds.len(), "one seed per point");
+        self.front_facing_batch(points, view, Some(&mut *seeds), out);
+        for (s, o) in seeds.iter_mut().zip(out.iter()) {
+            *s = o.map_or(NO_SEED, |q| q.element);
+        }
+    }
+
+    /// The front-facing batch, seeded or not.
+    #[track_caller]
+    fn front_facing_batch(
+        &self,
+        points: &[Vector3<f64>],
+        view: &View,
+        seeds: Option<&mut [u32]>,
+        out: &mut [Option<Projection>],
+    ) {
         assert_eq!(points.len(), out.len(), "one output slot per point");
         if !view.is_valid() {
             out.fill(None);
             return;
         }
-        let mut any_back = false;
-        for (p, o) in points.iter().zip(out.iter_mut()) {
-            *o = self.project(p);
-            any_back |= o.is_some_and(|q| view.is_back_facing(&q.point, &q.normal));
-        }
-        if !any_back {
+        self.project_batch(points, seeds, out);
+        if !out
+            .iter()
+            .any(|o| o.is_some_and(|q| view.is_back_facing(&q.point, &q.normal)))
+        {
             return;
         }
         let Some(direction) = self.silhouette_direction(view) else {
             return;
         };
-        let silhouette = UnionSilhouette::build(self, ViewBasis::new(direction), BURIED_TOLERANCE);
+        let mut silhouette =
+            UnionSilhouette::build(self, ViewBasis::new(direction), BURIED_TOLERANCE);
         for (p, o) in points.iter().zip(out.iter_mut()) {
             if let Some(plain) = o {
                 if view.is_back_facing(&plain.point, &plain.normal) {
-                    *plain = self.substitute(p, plain, view, &silhouette);
+                    *plain = self.substitute(p, plain, view, &mut silhouette);
                 }
             }
         }
@@ -186,7 +225,7 @@ impl SphereMeshGeometry {
         p: &Vector3<f64>,
         plain: &Projection,
         view: &View,
-        silhouette: &UnionSilhouette,
+        silhouette: &mut UnionSilhouette,
     ) -> Projection {
         if !is_usable(p) {
             return *plain;

@@ -2,11 +2,11 @@
 //! refreshed once per solver iteration, and the model-wide closest-point projection
 //! `Π_M(p)` (Eq. 3.6: the element with the smallest `φ_e(p)` wins).
 
-use super::bounding::BoundingBall;
+use super::bounding::{BallBlocks, BoundingBall, BLOCK};
 use super::bvh::ElementTree;
 use super::point_pill::{valid_sphere, PillFrame};
 use super::point_wedge::WedgeFrame;
-use super::{is_usable, Projection};
+use super::{is_usable, Projection, NO_SEED};
 use crate::shape::{Element, Sphere};
 use nalgebra::Vector3;
 
@@ -151,6 +151,8 @@ pub struct SphereMeshGeometry {
     pub(super) packed: Vec<[f64; 4]>,
     /// Bounding-ball hierarchy over the elements, for a first guess of the nearest element.
     pub(super) tree: ElementTree,
+    /// The bounding balls once more in `f32` blocks, for the vectorised first culling pass.
+    pub(super) blocks: BallBlocks,
 }
 
 impl SphereMeshGeometry {
@@ -171,12 +173,14 @@ impl SphereMeshGeometry {
             .map(|el| ElementFrame::build(el, spheres))
             .collect();
         let bounds: Vec<BoundingBall> = frames.iter().map(ElementFrame::bound).collect();
+        let tree = ElementTree::build(&bounds);
         Ok(Self {
             spheres: spheres.to_vec(),
             elements: elements.to_vec(),
             frames,
             packed: bounds.iter().map(pack).collect(),
-            tree: ElementTree::build(&bounds),
+            blocks: BallBlocks::new(&bounds, block_origin(&tree)),
+            tree,
             bounds,
         })
     }
@@ -208,6 +212,7 @@ impl SphereMeshGeometry {
             *packed = pack(b);
         }
         self.tree.refit(&self.bounds);
+        self.blocks.refit(&self.bounds, block_origin(&self.tree));
         Ok(())
     }
 
@@ -234,7 +239,7 @@ impl SphereMeshGeometry {
         if !is_usable(p) {
             return None;
         }
-        self.nearest(p).map(|(_, d)| d)
+        self.nearest(p, None).map(|(_, d)| d)
     }
 
     /// Signed distance from `p` to element `element` alone (`φ_e(p)`, Eq. 3.1 on one element).
@@ -264,10 +269,16 @@ impl SphereMeshGeometry {
     /// bound `‖p − C_e‖ − R_e` is not above the best distance found so far; ties go to the lower
     /// element index. `None` for a non-finite point or a model without elements.
     pub fn project(&self, p: &Vector3<f64>) -> Option<Projection> {
+        self.project_from(p, None)
+    }
+
+    /// [`project`](Self::project) with the search started at element `seed` (if in range).
+    #[inline]
+    pub(super) fn project_from(&self, p: &Vector3<f64>, seed: Option<usize>) -> Option<Projection> {
         if !is_usable(p) {
             return None;
         }
-        let (e, _) = self.nearest(p)?;
+        let (e, _) = self.nearest(p, seed)?;
         Some(self.globalize(e, self.frames[e].project(p)))
     }
 
@@ -278,9 +289,50 @@ impl SphereMeshGeometry {
     /// If `out.len() != points.len()`.
     #[track_caller]
     pub fn project_points(&self, points: &[Vector3<f64>], out: &mut [Option<Projection>]) {
+        self.project_batch(points, None, out);
+    }
+
+    /// [`project_points`](Self::project_points) with temporal coherence, for a tracker that
+    /// re-projects the same data points every solver iteration: `seeds[i]` names the element to
+    /// try first for `points[i]` (the element of its previous answer; [`NO_SEED`] or any
+    /// out-of-range value for none), which gives the culling of Eq. 3.6 a tight bound from the
+    /// start instead of the bounding-tree guess. On return `seeds[i]` holds the element of
+    /// `out[i]` ([`NO_SEED`] for `None`), ready for the next call.
+    ///
+    /// The seed only orders the search: `out` is bit for bit what
+    /// [`project_points`](Self::project_points) returns, whatever the seeds (stale, wrong or
+    /// out of range). Allocates nothing.
+    ///
+    /// # Panics
+    /// If `out` or `seeds` is not as long as `points`.
+    #[track_caller]
+    pub fn project_points_seeded(
+        &self,
+        points: &[Vector3<f64>],
+        seeds: &mut [u32],
+        out: &mut [Option<Projection>],
+    ) {
+        self.project_batch(points, Some(seeds), out);
+    }
+
+    /// The plain batch projection, seeded or not; writes the new seeds back.
+    #[track_caller]
+    pub(super) fn project_batch(
+        &self,
+        points: &[Vector3<f64>],
+        mut seeds: Option<&mut [u32]>,
+        out: &mut [Option<Projection>],
+    ) {
         assert_eq!(points.len(), out.len(), "one output slot per point");
-        for (p, o) in points.iter().zip(out.iter_mut()) {
-            *o = self.project(p);
+        if let Some(s) = &seeds {
+            assert_eq!(points.len(), s.len(), "one seed per point");
+        }
+        for (i, (p, o)) in points.iter().zip(out.iter_mut()).enumerate() {
+            let seed = seeds.as_deref_mut().map(|s| &mut s[i]);
+            *o = self.project_from(p, seed.as_deref().map(|&e| e as usize));
+            if let Some(s) = seed {
+                *s = o.map_or(NO_SEED, |q| q.element);
+            }
         }
     }
 
@@ -313,14 +365,23 @@ impl SphereMeshGeometry {
             .position(|(e, b)| e != hint && inside(e, b))
     }
 
-    /// The element minimising `φ_e(p)` and that minimum (`p` finite).
+    /// The element minimising `φ_e(p)` and that minimum (`p` finite), ties going to the lower
+    /// element index.
     ///
-    /// Branch and bound: a greedy descent of the bounding-ball tree guesses an element and its
-    /// distance `d`; then every other element is evaluated only if its bound `‖p − C_e‖ − R_e` is
-    /// not above the best `d` so far, tested without square roots (`d + R_e > 0` and
-    /// `‖p − C_e‖² ≤ (d + R_e)²`).
-    pub(super) fn nearest(&self, p: &Vector3<f64>) -> Option<(usize, f64)> {
-        let first = self.tree.guess(p)?;
+    /// Branch and bound: a first element, `seed` when given and in range (temporal coherence:
+    /// the previous answer is usually still the nearest, or close), otherwise the guess of a
+    /// greedy descent of the bounding-ball tree, gives a first distance `d`. Then every other
+    /// element is evaluated only if its bound `‖p − C_e‖ − R_e` is not above the best `d` so
+    /// far: blocks of bounding balls are first tested at once in `f32` with a widened bound
+    /// ([`BallBlocks`]), then survivors exactly, without square roots (`d + R_e > 0` and
+    /// `‖p − C_e‖² ≤ (d + R_e)²`). A skipped element has `φ_e(p) > d`, and an evaluated one
+    /// replaces the best only if strictly closer or tied with a lower index, so the answer is
+    /// the exact argmin whatever the first element: seeds change the cost, never the result.
+    pub(super) fn nearest(&self, p: &Vector3<f64>, seed: Option<usize>) -> Option<(usize, f64)> {
+        let first = match seed.filter(|&e| e < self.frames.len()) {
+            Some(e) => e,
+            None => self.tree.guess(p)?,
+        };
         let mut best = self.frames[first].distance(p);
         let mut best_e = first;
         let (px, py, pz) = (p.x, p.y, p.z);
@@ -329,29 +390,23 @@ impl SphereMeshGeometry {
             let t = best + b[3];
             t > 0.0 && dx * dx + dy * dy + dz * dz <= t * t
         };
-        let visit = |e: usize, best: &mut f64, best_e: &mut usize| {
-            if let Some(frame) = self.frames.get(e) {
-                let d = frame.distance_below(p, *best);
-                // Ties go to the lower index, so the answer does not depend on the first guess.
-                if d < *best || (d == *best && e < *best_e) {
-                    *best = d;
-                    *best_e = e;
-                }
-            }
-        };
-        for (chunk, balls) in self.packed.chunks(64).enumerate() {
-            // Branch-free pass against the guess's distance, then the survivors in order,
-            // re-tested against the improving best.
-            let mut mask = 0u64;
-            for (k, b) in balls.iter().enumerate() {
-                mask |= u64::from(survives(b, best)) << k;
-            }
+        let query = self.blocks.query(p);
+        for block in 0..self.blocks.len() {
+            let mut mask = self.blocks.survivors(&query, block, best);
             while mask != 0 {
-                let k = mask.trailing_zeros() as usize;
+                let e = block * BLOCK + mask.trailing_zeros() as usize;
                 mask &= mask - 1;
-                let e = chunk * 64 + k;
-                if e != first && survives(&balls[k], best) {
-                    visit(e, &mut best, &mut best_e);
+                let (Some(frame), Some(ball)) = (self.frames.get(e), self.packed.get(e)) else {
+                    break; // padding lanes (kept only on overflow)
+                };
+                if e == first || !survives(ball, best) {
+                    continue;
+                }
+                let d = frame.distance_below(p, best);
+                // Ties go to the lower index, so the answer does not depend on the first guess.
+                if d < best || (d == best && e < best_e) {
+                    best = d;
+                    best_e = e;
                 }
             }
         }
@@ -365,6 +420,12 @@ impl SphereMeshGeometry {
         pr.element = element as u32;
         pr
     }
+}
+
+/// The origin of the `f32` culling blocks: the center of the model's bounding ball, so that
+/// coordinates stored in `f32` stay small wherever the model is.
+fn block_origin(tree: &ElementTree) -> Vector3<f64> {
+    tree.root_ball().map_or_else(Vector3::zeros, |b| b.center)
 }
 
 fn pack(b: &BoundingBall) -> [f64; 4] {

@@ -186,6 +186,11 @@ pub(crate) fn any_orthogonal(u: &Vector3<f64>) -> Vector3<f64> {
     }
 }
 
+/// "No seed" in the seeded batch queries ([`SphereMeshGeometry::project_points_seeded`],
+/// [`SphereMeshGeometry::project_points_front_facing_seeded`]): search from the bounding-tree
+/// guess.
+pub const NO_SEED: u32 = u32::MAX;
+
 /// Coordinates and radii beyond this magnitude are rejected like non-finite ones: every product
 /// the queries form (squared norms of cross products of differences) then stays finite, which is
 /// what guarantees NaN-free results. Hands are measured in millimetres, so this is no limit.

@@ -12,8 +12,9 @@
 //! the visible side. Features shorter than [`MIN_FEATURE`] (or 10⁻⁴ of the piece) are not
 //! resolved.
 //!
-//! Built once per batch of points (it depends on the pose and the view only) and kept on the
-//! stack: at most [`MAX_PIECES`] pieces with [`MAX_VISIBLE`] visible ranges each.
+//! Set up once per batch of points (it depends on the pose and the view only), clipped lazily
+//! piece by piece as queries reach them, and kept on the stack: at most [`MAX_PIECES`] pieces
+//! with [`MAX_VISIBLE`] visible ranges each.
 
 use super::geometry::SphereMeshGeometry;
 use super::silhouette::{
@@ -47,6 +48,7 @@ pub(crate) struct VisiblePiece {
     /// Ball `[x, y, z, R]` containing the piece.
     bound: [f64; 4],
     visible: [Span; MAX_VISIBLE],
+    /// Number of visible ranges, or [`UNCLIPPED`].
     n_visible: u8,
 }
 
@@ -75,9 +77,14 @@ impl Default for VisiblePiece {
     }
 }
 
+/// [`VisiblePiece::n_visible`] of a piece not clipped yet.
+const UNCLIPPED: u8 = u8::MAX;
+
 /// The clipped silhouette of the model for one view.
 pub(crate) struct UnionSilhouette {
-    pub(crate) basis: ViewBasis,
+    basis: ViewBasis,
+    /// The burial tolerance of the clipping.
+    tol: f64,
     pieces: [VisiblePiece; MAX_PIECES],
     len: usize,
     /// Pieces of element `e` are `pieces[first[e]..first[e + 1]]` (when `grouped`).
@@ -86,28 +93,51 @@ pub(crate) struct UnionSilhouette {
 }
 
 impl UnionSilhouette {
-    /// Computes the clipped silhouette of `g` for the view `basis`.
+    /// The contour pieces of `g` for the view `basis`, clipped against the other elements with
+    /// tolerance `tol`.
+    ///
+    /// Clipping dominates the cost (tens of µs per element on a hand) while a batch of points
+    /// usually has only a few back-facing footpoints, near a few elements. So when every raw
+    /// piece fits (at most [`GROUPED_ELEMENTS`] elements and [`MAX_PIECES`] pieces), pieces are
+    /// stored unclipped and [`nearest`](Self::nearest) clips each one the first time a query
+    /// reaches it. Clipping a piece depends only on the piece and the model, and pieces left
+    /// with no visible range are skipped by queries, so the answers are those of clipping
+    /// everything up front (what happens otherwise, keeping the first [`MAX_PIECES`] visible
+    /// pieces in element order).
     pub(crate) fn build(g: &SphereMeshGeometry, basis: ViewBasis, tol: f64) -> Self {
-        let n_elements = g.frames.len();
         let mut sil = Self {
             basis,
+            tol,
             pieces: [VisiblePiece::default(); MAX_PIECES],
             len: 0,
             first: [0; GROUPED_ELEMENTS + 1],
-            grouped: n_elements <= GROUPED_ELEMENTS,
+            grouped: g.frames.len() <= GROUPED_ELEMENTS,
         };
+        if !(sil.grouped && sil.fill(g, true)) {
+            sil.len = 0;
+            sil.fill(g, false);
+        }
+        sil
+    }
+
+    /// Stores every element's pieces, unclipped when `lazy`, otherwise clipped with only the
+    /// visible ones kept. Returns `false` if a lazy fill ran out of room.
+    fn fill(&mut self, g: &SphereMeshGeometry, lazy: bool) -> bool {
         let mut raw = [Piece::Segment {
             spheres: [0, 0],
             normal: Vector3::zeros(),
         }; MAX_ELEMENT_PIECES];
         for (e, frame) in g.frames.iter().enumerate() {
-            if sil.grouped {
-                sil.first[e] = sil.len as u16;
+            if self.grouped {
+                self.first[e] = self.len as u16;
             }
             let (centers, radii) = (frame.centers(), frame.radii());
-            let k = element_pieces(centers, radii, &basis, &mut raw);
+            let k = element_pieces(centers, radii, &self.basis, &mut raw);
             for piece in &raw[..k] {
-                if sil.len == MAX_PIECES {
+                if self.len == MAX_PIECES {
+                    if lazy {
+                        return false;
+                    }
                     break;
                 }
                 let mut vp = VisiblePiece {
@@ -116,30 +146,36 @@ impl UnionSilhouette {
                     bound: piece.bound(centers, radii),
                     ..VisiblePiece::default()
                 };
-                clip(g, e, &basis, tol, &mut vp);
+                if lazy {
+                    vp.n_visible = UNCLIPPED;
+                } else {
+                    clip(g, e, &self.basis, self.tol, &mut vp);
+                }
                 if vp.n_visible > 0 {
-                    sil.pieces[sil.len] = vp;
-                    sil.len += 1;
+                    self.pieces[self.len] = vp;
+                    self.len += 1;
                 }
             }
         }
-        if sil.grouped {
-            sil.first[n_elements] = sil.len as u16;
+        if self.grouped {
+            self.first[g.frames.len()] = self.len as u16;
         }
-        sil
+        true
     }
 
     /// The visible silhouette point nearest to `p` if closer than `bound_d2` (squared), as
     /// (squared distance, element, point). The pieces of element `first` are tried first.
+    /// Clips the pieces it reaches that are not clipped yet.
     pub(crate) fn nearest(
-        &self,
+        &mut self,
         g: &SphereMeshGeometry,
         p: &Vector3<f64>,
         first: usize,
         bound_d2: f64,
     ) -> Option<(f64, usize, PiecePoint)> {
         let mut search = Nearest {
-            sil: self,
+            basis: self.basis,
+            tol: self.tol,
             g,
             p,
             bound_d2,
@@ -147,17 +183,18 @@ impl UnionSilhouette {
             best: None,
         };
         if self.grouped && first < g.frames.len().min(GROUPED_ELEMENTS) {
-            let range = |e: usize| self.first[e] as usize..self.first[e + 1] as usize;
-            search.scan(&self.pieces[range(first)]);
+            let starts = self.first;
+            let range = |e: usize| starts[e] as usize..starts[e + 1] as usize;
+            search.scan(&mut self.pieces[range(first)]);
             for (e, b) in g.packed.iter().enumerate() {
                 let reach = b[3] + search.reach;
                 let d2 = (p - Vector3::new(b[0], b[1], b[2])).norm_squared();
                 if e != first && d2 < reach * reach {
-                    search.scan(&self.pieces[range(e)]);
+                    search.scan(&mut self.pieces[range(e)]);
                 }
             }
         } else {
-            search.scan(&self.pieces[..self.len]);
+            search.scan(&mut self.pieces[..self.len]);
         }
         search.best
     }
@@ -165,7 +202,8 @@ impl UnionSilhouette {
 
 /// State of [`UnionSilhouette::nearest`].
 struct Nearest<'a> {
-    sil: &'a UnionSilhouette,
+    basis: ViewBasis,
+    tol: f64,
     g: &'a SphereMeshGeometry,
     p: &'a Vector3<f64>,
     bound_d2: f64,
@@ -175,7 +213,7 @@ struct Nearest<'a> {
 }
 
 impl Nearest<'_> {
-    fn scan(&mut self, pieces: &[VisiblePiece]) {
+    fn scan(&mut self, pieces: &mut [VisiblePiece]) {
         let p = self.p;
         for vp in pieces {
             let [x, y, z, r] = vp.bound;
@@ -183,14 +221,20 @@ impl Nearest<'_> {
             if (p - Vector3::new(x, y, z)).norm_squared() >= reach * reach {
                 continue;
             }
+            if vp.n_visible == UNCLIPPED {
+                clip(self.g, vp.element as usize, &self.basis, self.tol, vp);
+            }
+            if vp.n_visible == 0 {
+                continue;
+            }
             let frame = &self.g.frames[vp.element as usize];
             let (centers, radii) = (frame.centers(), frame.radii());
             let spans = &vp.visible[..vp.n_visible as usize];
             let point = match vp.piece {
                 Piece::Arc { sphere, .. } => {
-                    let u = self.sil.basis.flatten(&(p - centers[sphere as usize]));
+                    let u = self.basis.flatten(&(p - centers[sphere as usize]));
                     let d = nearest_direction(spans, u);
-                    Piece::arc_at_direction(sphere, centers, radii, &self.sil.basis, &d)
+                    Piece::arc_at_direction(sphere, centers, radii, &self.basis, &d)
                 }
                 Piece::Segment {
                     spheres: [i, j],
@@ -214,7 +258,7 @@ impl Nearest<'_> {
                             t = c;
                         }
                     }
-                    vp.piece.at(centers, radii, &self.sil.basis, t)
+                    vp.piece.at(centers, radii, &self.basis, t)
                 }
             };
             let d2 = (p - point.point).norm_squared();
