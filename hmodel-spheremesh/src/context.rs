@@ -3,7 +3,7 @@
 //! (thesis §3.3.1, Fig. 3.9) and IRLS weights, and the model→data push constraints of Eq. 3.5.
 
 use hand_model::kinematics::{Pose, PosedSkeleton, Skeleton};
-use hand_model::query::{Projection, SphereMeshGeometry, View};
+use hand_model::query::{Projection, SphereMeshGeometry, View, NO_SEED};
 use hand_model::render::{DepthRenderer, Intrinsics, PixelHit};
 use hand_model::shape::Element;
 use hand_model::solver::{IrlsParams, IterInfo, LmCallback, PoseContext, TermError};
@@ -60,6 +60,9 @@ pub struct TrackingCtx<'m> {
     geometry: SphereMeshGeometry,
     points: Vec<Vector3<f64>>,
     correspondences: Vec<Option<Projection>>,
+    /// Per point the element of its last correspondence: the first bound of the next search
+    /// (temporal coherence across iterations; results do not depend on it).
+    seeds: Vec<u32>,
     directions: Vec<Vector3<f64>>,
     residuals: Vec<f64>,
     weights: Vec<f64>,
@@ -125,6 +128,7 @@ impl<'m> TrackingCtx<'m> {
             geometry,
             points: Vec::new(),
             correspondences: Vec::new(),
+            seeds: Vec::new(),
             directions: Vec::new(),
             residuals: Vec::new(),
             weights: Vec::new(),
@@ -157,6 +161,8 @@ impl<'m> TrackingCtx<'m> {
         self.points.extend_from_slice(points);
         self.correspondences.clear();
         self.correspondences.resize(n, None);
+        self.seeds.clear();
+        self.seeds.resize(n, NO_SEED);
         self.directions.clear();
         self.directions.resize(n, Vector3::zeros());
         self.residuals.clear();
