@@ -187,6 +187,9 @@ impl BallBlocks {
     /// Bit `k` set for every lane `k` of block `block` whose ball may satisfy
     /// `‖p − C‖ − R ≤ best`: a superset of the elements that the exact test keeps. Overflow to
     /// infinities or NaN (coordinates near `f32::MAX`) keeps the lane.
+    // The negated comparisons keep a lane whose test is NaN: culling must never drop the
+    // true answer, so an incomparable bound counts as "may be closer".
+    #[allow(clippy::neg_cmp_op_on_partial_ord)]
     #[inline]
     pub(crate) fn survivors(&self, q: &BlockQuery, block: usize, best: f64) -> u32 {
         let [x, y, z, r] = &self.blocks[block];
