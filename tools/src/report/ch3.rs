@@ -112,7 +112,9 @@ pub fn write(args: &ReportArgs, out: &Path) -> Result<String> {
          E_d2m is the tracker's mean point-to-model distance (mm, the `mean_distance_mm` of its record); \
          E_m2d (Eq. 3.16) is measured here: the mean over the model's pixels, rendered from the sensor camera \
          at the returned pose, of the 2D distance (px) to the sensor silhouette. Every verdict is computed from \
-         the numbers in its table (differences under {:.0}% are called inconclusive).\n",
+         the numbers in its table (differences under {:.0}% are called inconclusive). Times are wall-clock \
+         on the machine that ran the report, with the variants of a table interleaved frame by frame: compare \
+         them within a table only.\n",
         out.display(),
         args.frames,
         args.seed,
