@@ -11,6 +11,7 @@
 
 use nalgebra::Vector3;
 
+use super::coverage::Footprint;
 use super::prepared::PreparedElement;
 use super::raycast::{cast_prepared, Ray, RayHit};
 use crate::error::{ModelError, Result};
@@ -162,6 +163,10 @@ pub struct DepthRenderer {
     rects: Vec<[u32; 4]>,
     fill: Vec<u32>,
     near: Vec<f64>,
+    /// Per pixel the candidate elements of [`DepthRenderer::render_hits`] (bit e); all zero
+    /// between calls.
+    candidates: Vec<u64>,
+    touched: Vec<u32>,
 }
 
 /// Exact pixel range `[lo, hi]` of `x/z` for a sphere entirely in front of the camera, along one
@@ -216,25 +221,97 @@ impl DepthRenderer {
     /// The pixels that see the model, as a list instead of an image (what the m2d term of
     /// Eq. 3.5 needs per solver iteration: no full-image buffers to clear): only pixels for
     /// which `keep(v·width + u)` holds are ray cast, and each one that hits is appended to
-    /// `out` (cleared first) in raster order within tiles. Same rays and hits as
-    /// [`render`](Self::render), same errors.
+    /// `out` (cleared first) in raster order. Same rays and hits as [`render`](Self::render),
+    /// same errors.
+    ///
+    /// Instead of tiles, each element's conservative screen footprint (exact bounds of its
+    /// spheres' perspective images, see `coverage.rs`) is scanned row by row, so a pixel is
+    /// ray cast only if it is kept and may see an element, and only against those elements —
+    /// the cost follows the kept part of the model's image, not the screen area around it
+    /// (models of more than 64 elements use the tiles).
     pub fn render_hits(
         &mut self,
         intrinsics: &Intrinsics,
         spheres: &[Sphere],
         elements: &[Element],
-        keep: impl FnMut(usize) -> bool,
+        mut keep: impl FnMut(usize) -> bool,
         out: &mut Vec<PixelHit>,
     ) -> Result<()> {
         out.clear();
-        self.for_each_hit(intrinsics, spheres, elements, keep, |k, hit| {
+        let mut push = |k: usize, hit: &RayHit| {
             out.push(PixelHit {
                 pixel: k as u32,
                 element: hit.element as u32,
                 point: hit.point,
                 normal: hit.normal,
             })
-        })
+        };
+        if elements.len() > 64 {
+            return self.for_each_hit(intrinsics, spheres, elements, keep, push);
+        }
+        intrinsics.validate()?;
+        self.prepare(spheres, elements)?;
+        // Candidates: the kept pixels of each element's conservative footprint
+        // (super::coverage), as a bit set per pixel; then one ray per candidate pixel against
+        // its candidates only, in element order (the tie rule of `cast_prepared`).
+        let (w, h) = (intrinsics.width, intrinsics.height);
+        self.candidates.resize(w as usize * h as usize, 0);
+        self.touched.clear();
+        let mut sph = [Sphere::new(Vector3::zeros(), 0.0); 3];
+        for (e, el) in elements.iter().enumerate() {
+            let ids = el.spheres();
+            for (d, &i) in sph.iter_mut().zip(ids) {
+                *d = spheres[i as usize];
+            }
+            let fp = Footprint::new(intrinsics, &sph[..ids.len()]);
+            let Some((v0, v1)) = fp.rows(h) else { continue };
+            for v in v0..=v1 {
+                let Some((u0, u1)) = fp.span(v, w) else {
+                    continue;
+                };
+                for u in u0..=u1 {
+                    let k = (v * w + u) as usize;
+                    if keep(k) {
+                        if self.candidates[k] == 0 {
+                            self.touched.push(k as u32);
+                        }
+                        self.candidates[k] |= 1 << e;
+                    }
+                }
+            }
+        }
+        self.touched.sort_unstable();
+        for &k in &self.touched {
+            let k = k as usize;
+            let mut bits = std::mem::take(&mut self.candidates[k]);
+            let ray = intrinsics.pixel_ray((k % w as usize) as f64, (k / w as usize) as f64);
+            let items = std::iter::from_fn(|| {
+                (bits != 0).then(|| {
+                    let e = bits.trailing_zeros() as usize;
+                    bits &= bits - 1;
+                    e
+                })
+            });
+            if let Some(hit) = cast_prepared(&ray, &self.prepared, items) {
+                push(k, &hit);
+            }
+        }
+        Ok(())
+    }
+
+    /// Prepare every element (exact ray casting, §3.3.2).
+    fn prepare(&mut self, spheres: &[Sphere], elements: &[Element]) -> Result<()> {
+        self.prepared.clear();
+        for (i, e) in elements.iter().enumerate() {
+            let p = PreparedElement::new(spheres, e).ok_or_else(|| ModelError::InvalidArgument {
+                name: "elements",
+                reason: format!(
+                    "element {i} refers to a sphere that is missing, non-finite or of negative radius"
+                ),
+            })?;
+            self.prepared.push(p);
+        }
+        Ok(())
     }
 
     /// The tile loop shared by the renderers: bins the elements, casts the ray of every kept
@@ -248,16 +325,7 @@ impl DepthRenderer {
         mut on_hit: impl FnMut(usize, &RayHit),
     ) -> Result<()> {
         intrinsics.validate()?;
-        self.prepared.clear();
-        for (i, e) in elements.iter().enumerate() {
-            let p = PreparedElement::new(spheres, e).ok_or_else(|| ModelError::InvalidArgument {
-                name: "elements",
-                reason: format!(
-                    "element {i} refers to a sphere that is missing, non-finite or of negative radius"
-                ),
-            })?;
-            self.prepared.push(p);
-        }
+        self.prepare(spheres, elements)?;
         let (w, h) = (intrinsics.width as usize, intrinsics.height as usize);
         let (tw, th) = (w.div_ceil(TILE), h.div_ceil(TILE));
         self.bin(intrinsics, tw, th);
@@ -451,27 +519,39 @@ mod tests {
     #[test]
     fn hit_list_equals_the_image_on_kept_pixels() {
         let (spheres, elements) = posed_hand();
-        let intr = intrinsics(160, 120, 150.0);
+        // Also an element straddling the camera plane (a footprint everywhere) and one behind.
+        let (mut s2, mut e2) = (spheres.clone(), elements.clone());
+        let n = s2.len() as u32;
+        s2.push(Sphere::new(Vector3::new(-150.0, 80.0, -20.0), 10.0));
+        s2.push(Sphere::new(Vector3::new(-90.0, 60.0, 200.0), 12.0));
+        s2.push(Sphere::new(Vector3::new(0.0, 0.0, -300.0), 10.0));
+        e2.push(Element::Pill([n, n + 1]));
+        e2.push(Element::Pill([n + 2, n + 2]));
         let mut renderer = DepthRenderer::new();
-        let mut image = DepthRender::default();
-        renderer
-            .render(&intr, &spheres, &elements, &mut image)
-            .unwrap();
-        let mut hits = Vec::new();
-        let keep = |k: usize| k % 3 != 0;
-        renderer
-            .render_hits(&intr, &spheres, &elements, keep, &mut hits)
-            .unwrap();
-        let expected: Vec<usize> = (0..image.element.len())
-            .filter(|&k| keep(k) && image.element[k] != NO_ELEMENT)
-            .collect();
-        let mut got: Vec<usize> = hits.iter().map(|h| h.pixel as usize).collect();
-        got.sort_unstable();
-        assert_eq!(got, expected);
-        for h in &hits {
-            let k = h.pixel as usize;
-            assert_eq!(h.element, image.element[k]);
-            assert_eq!(h.point.z as f32, image.depth[k]);
+        for (spheres, elements) in [(spheres, elements), (s2, e2)] {
+            for intr in [intrinsics(160, 120, 150.0), intrinsics(101, 77, 80.0)] {
+                let mut image = DepthRender::default();
+                renderer
+                    .render(&intr, &spheres, &elements, &mut image)
+                    .unwrap();
+                for modulus in [1usize, 3] {
+                    let keep = |k: usize| k % 3 != 0 || modulus == 1;
+                    let mut hits = Vec::new();
+                    renderer
+                        .render_hits(&intr, &spheres, &elements, keep, &mut hits)
+                        .unwrap();
+                    let expected: Vec<usize> = (0..image.element.len())
+                        .filter(|&k| keep(k) && image.element[k] != NO_ELEMENT)
+                        .collect();
+                    let got: Vec<usize> = hits.iter().map(|h| h.pixel as usize).collect();
+                    assert_eq!(got, expected);
+                    for h in &hits {
+                        let k = h.pixel as usize;
+                        assert_eq!(h.element, image.element[k]);
+                        assert_eq!(h.point.z as f32, image.depth[k]);
+                    }
+                }
+            }
         }
     }
 

@@ -9,6 +9,7 @@
 //! and a list of [`Element`](crate::shape::Element)s whose indices refer to them.
 
 mod atomic;
+mod coverage;
 pub mod depth;
 pub mod glb;
 pub mod mesh;
