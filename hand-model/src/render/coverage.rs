@@ -34,7 +34,8 @@ pub(crate) enum Footprint {
 /// or `None` when the sphere is not safely in front of the camera.
 fn image_radius(s: &Sphere) -> Option<f64> {
     let d = s.center.norm();
-    if !(s.center.z - s.radius > 1e-6 * (1.0 + d)) {
+    let gap = s.center.z - s.radius;
+    if gap.is_nan() || gap <= 1e-6 * (1.0 + d) {
         return None;
     }
     let alpha = (s.radius / d).min(1.0).asin();
