@@ -18,11 +18,18 @@ use crate::jacobian::{FootpointJacobian, MAX_ELEMENT_DOFS};
 pub struct CollisionParams {
     /// τ_collision (thesis §3.6 "Reproducibility": 1e3; hmodel 1e3), per mm² of penetration.
     pub weight: f64,
+    /// Penetration tolerated beyond the rest overlap (mm): soft tissue at a contact between
+    /// fingers compresses, so the rigid pills of a well-fitted model overlap a little in true
+    /// contact poses (a fist); only deeper penetration is penalized.
+    pub tolerance: f64,
 }
 
 impl Default for CollisionParams {
     fn default() -> Self {
-        Self { weight: 1e3 }
+        Self {
+            weight: 1e3,
+            tolerance: 0.0,
+        }
     }
 }
 
@@ -233,7 +240,7 @@ impl EnergyTerm<TrackingCtx<'_>> for Collision {
             let Some(c) = contact_of(posed, sa, sb) else {
                 continue;
             };
-            let pen = c.penetration - pair.rest_overlap;
+            let pen = c.penetration - pair.rest_overlap - self.params.tolerance.max(0.0);
             if pen <= 0.0 {
                 continue;
             }
