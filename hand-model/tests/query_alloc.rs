@@ -1,5 +1,5 @@
 //! The per-iteration queries allocate nothing: `update`, `project_points` and
-//! `project_points_front_facing` run under a counting global allocator.
+//! `project_points_front_facing` (seeded or not) run under a counting global allocator.
 // Implementing `GlobalAlloc` needs `unsafe`; it only forwards to the system allocator.
 #![allow(unsafe_code)]
 
@@ -49,6 +49,7 @@ fn per_iteration_queries_do_not_allocate() {
         })
         .collect();
     let mut out = vec![None; points.len()];
+    let mut seeds = vec![hand_model::query::NO_SEED; points.len()];
     let views = [
         View::Orthographic(Vector3::z()),
         View::Perspective {
@@ -60,8 +61,10 @@ fn per_iteration_queries_do_not_allocate() {
     let before = ALLOCATIONS.load(Ordering::SeqCst);
     g.update(&moved).unwrap();
     g.project_points(&points, &mut out);
+    g.project_points_seeded(&points, &mut seeds, &mut out);
     for view in &views {
         g.project_points_front_facing(&points, view, &mut out);
+        g.project_points_front_facing_seeded(&points, view, &mut seeds, &mut out);
     }
     let single = g.project_front_facing(&points[0], &views[0]);
     let after = ALLOCATIONS.load(Ordering::SeqCst);

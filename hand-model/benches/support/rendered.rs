@@ -5,6 +5,8 @@
 //! renderer and back-projected pixel by pixel, as a tracker sees a frame. Unlike points sampled
 //! around the surface, these lie on its visible side, so few plain footpoints are back-facing:
 //! only near silhouettes, creases, and behind the surface where sensor noise pushes them.
+// Each including target uses a different part.
+#![allow(dead_code)]
 
 use hand_model::kinematics::Pose;
 use hand_model::render::{render_depth, Intrinsics, NO_ELEMENT};

@@ -110,37 +110,61 @@ fn circumcenter(a: &Vector3<f64>, b: &Vector3<f64>, c: &Vector3<f64>) -> Option<
 /// Elements per block of [`BallBlocks`]: one mask per block, two SSE (or one AVX) vectors wide.
 pub(crate) const BLOCK: usize = 8;
 
+/// Element index of a padding lane in [`BallBlocks::element`].
+pub(crate) const PADDING: u32 = u32::MAX;
+
 /// The elements' bounding balls as `f32` structure-of-arrays blocks, for a vectorised first
 /// culling pass: one block of [`BLOCK`] balls is tested against a query at once, and only the
-/// survivors go through the exact `f64` test. In `f32`, coordinates of a hand 400 mm from the
-/// camera would carry 3·10⁻⁵ mm of rounding, so they are stored relative to `origin` (the
-/// center of the model's bounding ball) and the test is widened by a margin far above the
-/// rounding: the pass only ever keeps more elements than the exact test, never fewer.
+/// survivors go through the exact `f64` test.
+///
+/// - Blocks group elements that are close in space (the leaf order of the bounding-ball tree),
+///   and each block has a ball containing its elements' balls, so a query usually dismisses
+///   most blocks with one test. The culled argmin does not depend on the order in which
+///   elements are evaluated, so the lane order is free.
+/// - In `f32`, coordinates of a hand 400 mm from the camera would carry 3·10⁻⁵ mm of rounding,
+///   so they are stored relative to `origin` (the center of the model's bounding ball), and the
+///   tests are widened by a margin far above the rounding: the pass only ever keeps more
+///   elements than the exact test, never fewer.
 #[derive(Clone, Debug, Default)]
 pub(crate) struct BallBlocks {
     origin: Vector3<f64>,
-    /// `max_e (‖C_e − origin‖_∞ + R_e)`: with the query's offset, it bounds every magnitude
-    /// entering the test, hence its rounding.
+    /// `max (‖C − origin‖_∞ + R)` over the element and block balls: with the query's offset,
+    /// it bounds every magnitude entering the tests, hence their rounding.
     extent: f64,
+    /// The element of each lane (block `k`, lane `l` at `k·BLOCK + l`), [`PADDING`] for none.
+    element: Vec<u32>,
     /// Per block: x, y, z of the centers relative to `origin`, and the radii. Padding lanes have
     /// radius −∞ and never survive.
     blocks: Vec<[[f32; BLOCK]; 4]>,
+    /// Per block: a ball `[x, y, z, R]` (relative to `origin`) containing its elements' balls.
+    block_balls: Vec<[f32; 4]>,
 }
 
 /// A query point prepared for [`BallBlocks::survivors`].
 #[derive(Copy, Clone, Debug)]
 pub(crate) struct BlockQuery {
     p: [f32; 3],
-    /// Widening of the test: a relative 10⁻⁵ of the magnitudes involved, about ten times the
-    /// worst `f32` rounding of the distance and of `best + R`.
+    /// Widening of the tests: a relative 10⁻⁵ of the magnitudes involved, about ten times the
+    /// worst `f32` rounding of a distance and of `best + R`.
     margin_scale: f64,
 }
 
 impl BallBlocks {
-    /// Blocks for `balls`; sized once, refreshed by [`refit`](Self::refit) without allocating.
-    pub(crate) fn new(balls: &[BoundingBall], origin: Vector3<f64>) -> Self {
+    /// Blocks for `balls`, with the lanes in the order `order` (every element once); sized
+    /// once, refreshed by [`refit`](Self::refit) without allocating.
+    pub(crate) fn new(
+        balls: &[BoundingBall],
+        order: impl Iterator<Item = u32>,
+        origin: Vector3<f64>,
+    ) -> Self {
+        let n_blocks = balls.len().div_ceil(BLOCK);
+        let mut element: Vec<u32> = order.collect();
+        debug_assert_eq!(element.len(), balls.len());
+        element.resize(n_blocks * BLOCK, PADDING);
         let mut b = Self {
-            blocks: vec![[[0.0; BLOCK]; 4]; balls.len().div_ceil(BLOCK)],
+            element,
+            blocks: vec![[[0.0; BLOCK]; 4]; n_blocks],
+            block_balls: vec![[0.0; 4]; n_blocks],
             ..Self::default()
         };
         b.refit(balls, origin);
@@ -151,13 +175,18 @@ impl BallBlocks {
     pub(crate) fn refit(&mut self, balls: &[BoundingBall], origin: Vector3<f64>) {
         self.origin = origin;
         self.extent = 0.0;
-        for (k, block) in self.blocks.iter_mut().enumerate() {
-            for (lane, ball) in (0..BLOCK).map(|lane| (lane, balls.get(k * BLOCK + lane))) {
-                let (c, r) = match ball {
+        let lanes = self.element.chunks(BLOCK);
+        for ((block, block_ball), ids) in
+            self.blocks.iter_mut().zip(&mut self.block_balls).zip(lanes)
+        {
+            let mut all: Option<BoundingBall> = None;
+            for (lane, &e) in ids.iter().enumerate() {
+                let (c, r) = match balls.get(e as usize) {
                     Some(ball) => {
-                        let c = ball.center - origin;
-                        self.extent = self.extent.max(c.abs().max() + ball.radius);
-                        (c, ball.radius)
+                        all = Some(all.map_or(*ball, |a| {
+                            BoundingBall::of_two(&a.center, a.radius, &ball.center, ball.radius)
+                        }));
+                        (ball.center - origin, ball.radius)
                     }
                     None => (Vector3::zeros(), f64::NEG_INFINITY),
                 };
@@ -166,12 +195,31 @@ impl BallBlocks {
                 block[2][lane] = c.z as f32;
                 block[3][lane] = r as f32;
             }
+            let all = all.unwrap_or(BoundingBall {
+                center: origin,
+                radius: f64::NEG_INFINITY,
+            });
+            let c = all.center - origin;
+            *block_ball = [c.x as f32, c.y as f32, c.z as f32, all.radius as f32];
+        }
+        for ball in balls.iter().map(|b| (b.center - origin, b.radius)) {
+            self.extent = self.extent.max(ball.0.abs().max() + ball.1);
+        }
+        for b in &self.block_balls {
+            let c = Vector3::new(b[0], b[1], b[2]).map(f64::from);
+            self.extent = self.extent.max(c.abs().max() + f64::from(b[3]));
         }
     }
 
-    /// Number of blocks (element `e` is lane `e % BLOCK` of block `e / BLOCK`).
+    /// Number of blocks.
     pub(crate) fn len(&self) -> usize {
         self.blocks.len()
+    }
+
+    /// The elements of the lanes of block `block` ([`PADDING`] for none).
+    #[inline]
+    pub(crate) fn elements(&self, block: usize) -> &[u32] {
+        &self.element[block * BLOCK..(block + 1) * BLOCK]
     }
 
     /// Prepares the query point `p`.
@@ -184,7 +232,7 @@ impl BallBlocks {
         }
     }
 
-    /// Bit `k` set for every lane `k` of block `block` whose ball may satisfy
+    /// Bit `l` set for every lane `l` of block `block` whose ball may satisfy
     /// `‖p − C‖ − R ≤ best`: a superset of the elements that the exact test keeps. Overflow to
     /// infinities or NaN (coordinates near `f32::MAX`) keeps the lane.
     // The negated comparisons keep a lane whose test is NaN: culling must never drop the
@@ -192,16 +240,26 @@ impl BallBlocks {
     #[allow(clippy::neg_cmp_op_on_partial_ord)]
     #[inline]
     pub(crate) fn survivors(&self, q: &BlockQuery, block: usize, best: f64) -> u32 {
-        let [x, y, z, r] = &self.blocks[block];
         let reach = (best + q.margin_scale + 1e-5 * best.abs()) as f32;
+        let culled = |x: f32, y: f32, z: f32, r: f32| {
+            let (dx, dy, dz) = (q.p[0] - x, q.p[1] - y, q.p[2] - z);
+            let t = reach + r;
+            (t <= 0.0) | (dx * dx + dy * dy + dz * dz > t * t)
+        };
+        let [bx, by, bz, br] = self.block_balls[block];
+        if culled(bx, by, bz, br) {
+            return 0;
+        }
+        let [x, y, z, r] = &self.blocks[block];
         // Written lane-wise into an array of bits (not as a running mask) so that it compiles to
         // packed compares on baseline x86-64.
         let mut bits = [0u32; BLOCK];
         for (lane, bit) in bits.iter_mut().enumerate() {
-            let (dx, dy, dz) = (q.p[0] - x[lane], q.p[1] - y[lane], q.p[2] - z[lane]);
-            let t = reach + r[lane];
-            let keep = !(t <= 0.0) & !(dx * dx + dy * dy + dz * dz > t * t);
-            *bit = if keep { 1 << lane } else { 0 };
+            *bit = if culled(x[lane], y[lane], z[lane], r[lane]) {
+                0
+            } else {
+                1 << lane
+            };
         }
         bits.iter().fold(0, |mask, bit| mask | bit)
     }

@@ -99,6 +99,15 @@ impl ElementTree {
         })
     }
 
+    /// The elements in leaf storage order: a left-to-right walk of the tree, so elements that
+    /// are close in the order are close in space.
+    pub(crate) fn leaf_order(&self) -> impl Iterator<Item = u32> + '_ {
+        self.nodes.iter().filter_map(|n| match n.children {
+            Children::Leaf(e) => Some(e),
+            Children::Inner(..) => None,
+        })
+    }
+
     /// Greedy descent to one leaf, always into the child with the smaller power
     /// `‖p − C‖² − R²`: a cheap guess of the element nearest to `p`. `None` for an empty tree.
     #[inline]

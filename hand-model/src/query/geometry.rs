@@ -2,7 +2,7 @@
 //! refreshed once per solver iteration, and the model-wide closest-point projection
 //! `Π_M(p)` (Eq. 3.6: the element with the smallest `φ_e(p)` wins).
 
-use super::bounding::{BallBlocks, BoundingBall, BLOCK};
+use super::bounding::{BallBlocks, BoundingBall};
 use super::bvh::ElementTree;
 use super::point_pill::{valid_sphere, PillFrame};
 use super::point_wedge::WedgeFrame;
@@ -64,7 +64,7 @@ impl ElementFrame {
     #[inline]
     pub(crate) fn distance_below(&self, p: &Vector3<f64>, best: f64) -> f64 {
         match self {
-            ElementFrame::Pill(f) => f.distance(p),
+            ElementFrame::Pill(f) => f.distance_below(p, best),
             ElementFrame::Wedge(f) => f.distance_below(p, best),
         }
     }
@@ -147,7 +147,7 @@ pub struct SphereMeshGeometry {
     pub(super) elements: Vec<Element>,
     pub(super) frames: Vec<ElementFrame>,
     pub(super) bounds: Vec<BoundingBall>,
-    /// The bounding balls again as packed `[x, y, z, R]`, for the culling loop.
+    /// The bounding balls again as packed `[x, y, z, R]`, for the burial and silhouette tests.
     pub(super) packed: Vec<[f64; 4]>,
     /// Bounding-ball hierarchy over the elements, for a first guess of the nearest element.
     pub(super) tree: ElementTree,
@@ -179,7 +179,7 @@ impl SphereMeshGeometry {
             elements: elements.to_vec(),
             frames,
             packed: bounds.iter().map(pack).collect(),
-            blocks: BallBlocks::new(&bounds, block_origin(&tree)),
+            blocks: BallBlocks::new(&bounds, tree.leaf_order(), block_origin(&tree)),
             tree,
             bounds,
         })
@@ -273,12 +273,26 @@ impl SphereMeshGeometry {
     }
 
     /// [`project`](Self::project) with the search started at element `seed` (if in range).
+    ///
+    /// A seed is usually the answer, so it is projected in full up front rather than first
+    /// evaluated for its distance only (a projection's `distance` is bit for bit the element's
+    /// `distance`, so the search is the same).
     #[inline]
     pub(super) fn project_from(&self, p: &Vector3<f64>, seed: Option<usize>) -> Option<Projection> {
         if !is_usable(p) {
             return None;
         }
-        let (e, _) = self.nearest(p, seed)?;
+        let e = match seed.filter(|&e| e < self.frames.len()) {
+            Some(first) => {
+                let pr = self.frames[first].project(p);
+                let (e, _) = self.search(p, first, pr.distance);
+                if e == first {
+                    return Some(self.globalize(e, pr));
+                }
+                e
+            }
+            None => self.nearest(p, None)?.0,
+        };
         Some(self.globalize(e, self.frames[e].project(p)))
     }
 
@@ -366,51 +380,51 @@ impl SphereMeshGeometry {
     }
 
     /// The element minimising `φ_e(p)` and that minimum (`p` finite), ties going to the lower
-    /// element index.
-    ///
-    /// Branch and bound: a first element, `seed` when given and in range (temporal coherence:
-    /// the previous answer is usually still the nearest, or close), otherwise the guess of a
-    /// greedy descent of the bounding-ball tree, gives a first distance `d`. Then every other
-    /// element is evaluated only if its bound `‖p − C_e‖ − R_e` is not above the best `d` so
-    /// far: blocks of bounding balls are first tested at once in `f32` with a widened bound
-    /// ([`BallBlocks`]), then survivors exactly, without square roots (`d + R_e > 0` and
-    /// `‖p − C_e‖² ≤ (d + R_e)²`). A skipped element has `φ_e(p) > d`, and an evaluated one
-    /// replaces the best only if strictly closer or tied with a lower index, so the answer is
-    /// the exact argmin whatever the first element: seeds change the cost, never the result.
+    /// element index: [`search`](Self::search) from `seed` when given and in range (temporal
+    /// coherence: the previous answer is usually still the nearest, or close), otherwise from
+    /// the guess of a greedy descent of the bounding-ball tree.
     pub(super) fn nearest(&self, p: &Vector3<f64>, seed: Option<usize>) -> Option<(usize, f64)> {
         let first = match seed.filter(|&e| e < self.frames.len()) {
             Some(e) => e,
             None => self.tree.guess(p)?,
         };
-        let mut best = self.frames[first].distance(p);
+        Some(self.search(p, first, self.frames[first].distance(p)))
+    }
+
+    /// Branch and bound for the argmin of Eq. 3.6, given element `first` at distance `best`:
+    /// every other element is evaluated only if its bound `‖p − C_e‖ − R_e` is not above the
+    /// best distance so far. Blocks of bounding balls are first tested at once in `f32` with a
+    /// widened bound ([`BallBlocks`]), and the survivors are evaluated. A skipped element has
+    /// `φ_e(p) > d`, every
+    /// element tied with the final minimum is evaluated, and ties go to the lower index, so the
+    /// answer is the exact argmin whatever `first` and the evaluation order: seeds change the
+    /// cost, never the result.
+    fn search(&self, p: &Vector3<f64>, first: usize, mut best: f64) -> (usize, f64) {
         let mut best_e = first;
-        let (px, py, pz) = (p.x, p.y, p.z);
-        let survives = |b: &[f64; 4], best: f64| {
-            let (dx, dy, dz) = (px - b[0], py - b[1], pz - b[2]);
-            let t = best + b[3];
-            t > 0.0 && dx * dx + dy * dy + dz * dz <= t * t
-        };
         let query = self.blocks.query(p);
         for block in 0..self.blocks.len() {
             let mut mask = self.blocks.survivors(&query, block, best);
+            let lanes = self.blocks.elements(block);
             while mask != 0 {
-                let e = block * BLOCK + mask.trailing_zeros() as usize;
+                let e = lanes[mask.trailing_zeros() as usize] as usize;
                 mask &= mask - 1;
-                let (Some(frame), Some(ball)) = (self.frames.get(e), self.packed.get(e)) else {
-                    break; // padding lanes (kept only on overflow)
+                // Padding lanes (kept only on overflow) name no element. The few survivors of
+                // the widened `f32` test that the exact one would drop are evaluated as well:
+                // evaluating more elements never changes the argmin.
+                let Some(frame) = self.frames.get(e) else {
+                    continue;
                 };
-                if e == first || !survives(ball, best) {
+                if e == first {
                     continue;
                 }
                 let d = frame.distance_below(p, best);
-                // Ties go to the lower index, so the answer does not depend on the first guess.
                 if d < best || (d == best && e < best_e) {
                     best = d;
                     best_e = e;
                 }
             }
         }
-        Some((best_e, best))
+        (best_e, best)
     }
 
     /// Re-expresses an element-local projection over the model's sphere indices.

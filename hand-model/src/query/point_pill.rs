@@ -84,6 +84,26 @@ impl PillFrame {
         }
     }
 
+    /// [`distance`](Self::distance) when it is not above `best`; otherwise some value `> best`,
+    /// without evaluating the pill when its enclosing capsule (the axis segment grown by the
+    /// larger radius) is already farther than `best`. Ball survivors of the model-wide search
+    /// are often neighbouring phalanges whose capsule rules them out without square roots.
+    #[inline]
+    pub(crate) fn distance_below(&self, p: &Vector3<f64>, best: f64) -> f64 {
+        if let PillShape::Cone { axis, len, .. } = self.shape {
+            let w = p - self.centers[0];
+            let x = w.dot(&axis).clamp(0.0, len);
+            let d2 = (w - axis * x).norm_squared();
+            // The relative slack of the bounding balls covers the rounding of both sides.
+            let scale = w.abs().max() + len + self.radii[0] + self.radii[1];
+            let t = best + self.radii[0].max(self.radii[1]) + 1e-9 * scale;
+            if t <= 0.0 || d2 > t * t {
+                return f64::INFINITY;
+            }
+        }
+        self.distance(p)
+    }
+
     /// Signed distance from `p` to the pill surface (negative inside), without the footpoint.
     #[inline]
     pub(crate) fn distance(&self, p: &Vector3<f64>) -> f64 {

@@ -105,6 +105,11 @@ impl UnionSilhouette {
     /// everything up front (what happens otherwise, keeping the first [`MAX_PIECES`] visible
     /// pieces in element order).
     pub(crate) fn build(g: &SphereMeshGeometry, basis: ViewBasis, tol: f64) -> Self {
+        Self::build_with(g, basis, tol, true)
+    }
+
+    /// [`build`](Self::build), lazily clipped only when `lazy` (and every raw piece fits).
+    fn build_with(g: &SphereMeshGeometry, basis: ViewBasis, tol: f64, lazy: bool) -> Self {
         let mut sil = Self {
             basis,
             tol,
@@ -113,7 +118,7 @@ impl UnionSilhouette {
             first: [0; GROUPED_ELEMENTS + 1],
             grouped: g.frames.len() <= GROUPED_ELEMENTS,
         };
-        if !(sil.grouped && sil.fill(g, true)) {
+        if !(lazy && sil.grouped && sil.fill(g, true)) {
             sil.len = 0;
             sil.fill(g, false);
         }
@@ -667,6 +672,49 @@ pub(crate) fn crossing(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::shape::{Element, Sphere};
+
+    /// Lazy clipping answers exactly as clipping everything up front, on a hand-like model
+    /// (31 elements) seen from several directions.
+    #[test]
+    fn lazy_clipping_answers_as_eager_clipping() {
+        let t = crate::spheremesh::default_right_hand();
+        let mut pose = crate::kinematics::Pose::zeros(&t.skeleton);
+        for (name, v) in [
+            ("index_mcp_flex", 0.8),
+            ("middle_pip_flex", 1.0),
+            ("global_rx", 0.5),
+        ] {
+            pose.set(&t.skeleton, name, v).unwrap();
+        }
+        let spheres: Vec<Sphere> = crate::spheremesh::PosedSphereMesh::new(&t, &pose).spheres;
+        let elements: Vec<Element> = t.elements.iter().map(|e| e.element).collect();
+        let g = SphereMeshGeometry::new(&spheres, &elements).unwrap();
+        let ball = g.tree.root_ball().unwrap();
+        let mut k = 0u32;
+        // A deterministic low-discrepancy walk through the model's bounding ball.
+        let mut next = || {
+            k += 1;
+            let f = |a: f64| (f64::from(k) * a).fract() * 2.0 - 1.0;
+            ball.center + Vector3::new(f(0.618_034), f(0.754_878), f(0.569_840)) * ball.radius
+        };
+        for v in [Vector3::z(), Vector3::new(0.4, -0.3, 1.0), Vector3::x()] {
+            let basis = ViewBasis::new(v.normalize());
+            let mut lazy = UnionSilhouette::build(&g, basis, 1e-6);
+            let mut eager = UnionSilhouette::build_with(&g, basis, 1e-6, false);
+            assert!(lazy.pieces[..lazy.len]
+                .iter()
+                .all(|p| p.n_visible == UNCLIPPED));
+            for _ in 0..400 {
+                let p = next();
+                let e0 = g.project(&p).unwrap().element as usize;
+                let a = lazy.nearest(&g, &p, e0, f64::INFINITY);
+                let b = eager.nearest(&g, &p, e0, f64::INFINITY);
+                assert_eq!(a.map(|x| (x.0, x.1)), b.map(|x| (x.0, x.1)));
+                assert_eq!(a.map(|x| x.2.point), b.map(|x| x.2.point));
+            }
+        }
+    }
 
     #[test]
     fn stack_footprint_stays_moderate() {

@@ -1,0 +1,237 @@
+//! The seeded batch queries (`project_points_seeded`, `project_points_front_facing_seeded`)
+//! return bit for bit what the unseeded ones return, whatever the seeds (none, stale, random,
+//! out of range), write the answers' elements back as seeds, and reject non-finite points; the
+//! culled plain projection is the exact argmin of Eq. 3.6 (ties to the lower element index).
+
+mod common;
+
+#[path = "../benches/support/hand_like.rs"]
+mod hand_like;
+#[path = "../benches/support/rendered.rs"]
+mod rendered;
+
+use common::*;
+use hand_like::hand_like_geometry;
+use hand_model::query::{Projection, SphereMeshGeometry, View, NO_SEED};
+use hand_model::shape::{Element, Sphere};
+use nalgebra::Vector3;
+use rand::Rng;
+use rand_chacha::ChaCha8Rng;
+
+/// Seed vectors to try for `n` points on a model with `elements` elements.
+fn seed_sets(rng: &mut ChaCha8Rng, n: usize, elements: usize) -> Vec<Vec<u32>> {
+    let far = [elements as u32, elements as u32 + 7, NO_SEED - 1, NO_SEED];
+    vec![
+        vec![NO_SEED; n],
+        vec![0; n],
+        (0..n)
+            .map(|_| rng.random_range(0..elements as u32))
+            .collect(),
+        (0..n)
+            .map(|_| far[rng.random_range(0..far.len())])
+            .collect(),
+    ]
+}
+
+/// The plain projection by brute force: the element with the smallest `φ_e(p)`, the first one
+/// on ties, projected.
+fn brute_force(g: &SphereMeshGeometry, p: &Vector3<f64>) -> Option<Projection> {
+    let mut best: Option<(usize, f64)> = None;
+    for e in 0..g.elements().len() {
+        let d = g.phi_element(e, p)?;
+        if best.is_none_or(|(_, b)| d < b) {
+            best = Some((e, d));
+        }
+    }
+    g.project_on_element(best?.0, p)
+}
+
+fn element_of(o: &Option<Projection>) -> u32 {
+    o.map_or(NO_SEED, |q| q.element)
+}
+
+/// Checks every seeded query on `points` against the unseeded ones (and the plain projection
+/// against brute force), with seed vectors from `seed_sets` plus `extra`.
+fn check_seeded(
+    g: &SphereMeshGeometry,
+    points: &[Vector3<f64>],
+    views: &[View],
+    extra: &[Vec<u32>],
+    rng: &mut ChaCha8Rng,
+) {
+    let n = points.len();
+    let mut plain = vec![None; n];
+    g.project_points(points, &mut plain);
+    for (p, q) in points.iter().zip(&plain) {
+        assert_eq!(*q, brute_force(g, p), "culled argmin differs at {p:?}");
+        // Seeded searches start from the seed's projection, whose distance must be the
+        // element's φ_e bit for bit for the search to be the same.
+        for e in 0..g.elements().len() {
+            let d = g.project_on_element(e, p).unwrap().distance;
+            assert_eq!(d.to_bits(), g.phi_element(e, p).unwrap().to_bits());
+        }
+    }
+    let mut seeds = seed_sets(rng, n, g.elements().len());
+    seeds.extend_from_slice(extra);
+    let mut out = vec![None; n];
+    for initial in &seeds {
+        let mut s = initial.clone();
+        g.project_points_seeded(points, &mut s, &mut out);
+        // Bitwise: `Projection` holds only floats compared with `==`; also compare the bits.
+        for (a, b) in out.iter().zip(&plain) {
+            assert_eq!(a, b);
+            assert_eq!(bits(a), bits(b));
+        }
+        assert!(s.iter().zip(&out).all(|(s, o)| *s == element_of(o)));
+    }
+    for view in views {
+        let mut unseeded = vec![None; n];
+        g.project_points_front_facing(points, view, &mut unseeded);
+        for initial in &seeds {
+            let mut s = initial.clone();
+            g.project_points_front_facing_seeded(points, view, &mut s, &mut out);
+            for (a, b) in out.iter().zip(&unseeded) {
+                assert_eq!(bits(a), bits(b), "{view:?}");
+            }
+            assert!(s.iter().zip(&out).all(|(s, o)| *s == element_of(o)));
+        }
+    }
+}
+
+/// Every float of a projection as bits (so that −0 and 0 differ), with its indices.
+fn bits(o: &Option<Projection>) -> Option<(Vec<u64>, [u32; 3], u32)> {
+    o.map(|q| {
+        let floats = q
+            .point
+            .iter()
+            .chain(&q.normal)
+            .chain(&q.skeleton_point)
+            .chain(&q.weights)
+            .chain([&q.distance]);
+        (floats.map(|x| x.to_bits()).collect(), q.spheres, q.element)
+    })
+}
+
+#[test]
+fn seeded_queries_on_rendered_hands_equal_unseeded() {
+    let mut rng = rng(31);
+    let views = [
+        View::Orthographic(Vector3::z()),
+        View::Perspective {
+            camera_center: Vector3::zeros(),
+        },
+    ];
+    for scene in rendered::rendered_scenes() {
+        let g = SphereMeshGeometry::new(&scene.spheres, &scene.elements).unwrap();
+        let previous = SphereMeshGeometry::new(&scene.previous, &scene.elements).unwrap();
+        for points in [&scene.points, &scene.noisy] {
+            // Stale seeds: the answers at the previous pose.
+            let mut stale = vec![NO_SEED; points.len()];
+            let mut out = vec![None; points.len()];
+            previous.project_points_seeded(points, &mut stale, &mut out);
+            check_seeded(&g, points, &views, &[stale], &mut rng);
+        }
+    }
+}
+
+#[test]
+fn seeded_queries_on_random_points_equal_unseeded() {
+    let (spheres, elements) = hand_like_geometry();
+    let g = SphereMeshGeometry::new(&spheres, &elements).unwrap();
+    let mut rng = rng(32);
+    let refs: Vec<&Sphere> = spheres.iter().collect();
+    let mut points: Vec<Vector3<f64>> = (0..1500)
+        .map(|_| random_point_near(&mut rng, &refs, 20.0))
+        .collect();
+    // Points on sphere surfaces and at centers (ties between elements sharing spheres).
+    for s in &spheres {
+        points.push(s.center);
+        points.push(s.center + random_unit(&mut rng) * s.radius);
+    }
+    let views = [
+        View::Orthographic(Vector3::z()),
+        View::Orthographic(Vector3::new(0.3, -0.2, 1.0)),
+        View::Perspective {
+            camera_center: Vector3::new(0.0, 50.0, -400.0),
+        },
+    ];
+    check_seeded(&g, &points, &views, &[], &mut rng);
+}
+
+#[test]
+fn seeded_queries_on_random_meshes_equal_unseeded() {
+    let mut rng = rng(33);
+    // Up to 70 elements: more than one culling block, and past the lazily clipped silhouette's
+    // element limit (64).
+    for (k, n_elements) in [1, 2, 9, 31, 40, 70].into_iter().enumerate() {
+        let offset = Vector3::new(0.0, 0.0, 400.0 * (k % 2) as f64);
+        let spheres: Vec<Sphere> = (0..30)
+            .map(|_| {
+                let s = random_sphere(&mut rng, 40.0, 10.0);
+                Sphere::new(s.center + offset, s.radius)
+            })
+            .collect();
+        let elements: Vec<Element> = (0..n_elements)
+            .map(|_| {
+                let ids: [u32; 3] = std::array::from_fn(|_| rng.random_range(0..30u32));
+                if rng.random_bool(0.5) {
+                    Element::Pill([ids[0], ids[1]])
+                } else {
+                    Element::Wedge(ids)
+                }
+            })
+            .collect();
+        let g = SphereMeshGeometry::new(&spheres, &elements).unwrap();
+        let refs: Vec<&Sphere> = spheres.iter().collect();
+        let points: Vec<Vector3<f64>> = (0..300)
+            .map(|_| random_point_near(&mut rng, &refs, 10.0))
+            .collect();
+        let views = [
+            View::Orthographic(random_unit(&mut rng)),
+            View::Perspective {
+                camera_center: offset + random_unit(&mut rng) * 300.0,
+            },
+        ];
+        check_seeded(&g, &points, &views, &[], &mut rng);
+    }
+}
+
+#[test]
+fn seeded_queries_reject_non_finite_points_and_check_lengths() {
+    let (spheres, elements) = hand_like_geometry();
+    let g = SphereMeshGeometry::new(&spheres, &elements).unwrap();
+    let points = [
+        Vector3::new(0.0, -60.0, 380.0),
+        Vector3::new(f64::NAN, 0.0, 400.0),
+        Vector3::new(0.0, f64::INFINITY, 400.0),
+        Vector3::new(0.0, 0.0, 1e300),
+    ];
+    let mut out = vec![None; points.len()];
+    let view = View::Orthographic(Vector3::z());
+    let mut seeds = vec![3; points.len()];
+    g.project_points_seeded(&points, &mut seeds, &mut out);
+    assert!(out[0].is_some() && out[1..].iter().all(Option::is_none));
+    assert_eq!(seeds[1..], [NO_SEED; 3]);
+    let mut seeds = vec![3; points.len()];
+    g.project_points_front_facing_seeded(&points, &view, &mut seeds, &mut out);
+    assert!(out[0].is_some() && out[1..].iter().all(Option::is_none));
+    assert_eq!(seeds[1..], [NO_SEED; 3]);
+    // An invalid view answers nothing.
+    g.project_points_front_facing_seeded(
+        &points,
+        &View::Orthographic(Vector3::zeros()),
+        &mut seeds,
+        &mut out,
+    );
+    assert!(out.iter().all(Option::is_none) && seeds == [NO_SEED; 4]);
+
+    let short = std::panic::catch_unwind(|| {
+        let mut seeds = vec![NO_SEED; 2];
+        let mut out = vec![None; points.len()];
+        g.project_points_seeded(&points, &mut seeds, &mut out);
+    });
+    assert!(
+        short.is_err(),
+        "a seed slice of the wrong length is refused"
+    );
+}
