@@ -14,12 +14,12 @@
 //! - the hand leaving and re-entering the view: flagged while away, recovered after it returns.
 
 use eval::synthetic::{SyntheticRun, SyntheticSequence, SyntheticSpec};
+
+#[path = "support/penetration.rs"]
+mod penetration;
+use penetration::max_penetration;
 use hand_model::cylinder::CylinderModel;
-use hand_model::kinematics::Pose;
-use hand_model::shape::Element;
 use hand_model::solver::PcaPrior;
-use hand_model::spheremesh::{PosedSphereMesh, SphereMeshTemplate};
-use hmodel_spheremesh::terms::{pill_contact, Collision, CollisionParams};
 use hmodel_spheremesh::{Tracker, TrackerConfig};
 
 fn sequence(motion: &str, noise: &str, frames: usize) -> SyntheticSequence {
@@ -70,41 +70,6 @@ fn track_cylinders(motion: &str, noise: &str, frames: usize) -> SyntheticRun {
         .unwrap()
 }
 
-/// Per frame whether the ground truth is physically possible: no two finger pills of the
-/// template interpenetrate by more than `tolerance` mm beyond their rest overlap.
-fn possible_truth(template: &SphereMeshTemplate, run: &SyntheticRun, tolerance: f64) -> Vec<bool> {
-    let t = template;
-    let pairs = Collision::new(t, CollisionParams::default());
-    run.truth
-        .iter()
-        .map(|truth| {
-            let values = t
-                .skeleton
-                .dofs()
-                .iter()
-                .map(|d| truth.pose.get(&d.name).copied().unwrap_or(0.0))
-                .collect();
-            let posed = PosedSphereMesh::new(t, &Pose { values });
-            pairs.pairs().iter().all(|p| {
-                let pill = |e: usize| match t.elements[e].element {
-                    Element::Pill(s) => Some(s.map(|i| posed.spheres[i as usize])),
-                    Element::Wedge(_) => None,
-                };
-                let (Some(a), Some(b)) = (pill(p.a), pill(p.b)) else {
-                    return true;
-                };
-                pill_contact(
-                    [a[0].center, a[1].center],
-                    [a[0].radius, a[1].radius],
-                    [b[0].center, b[1].center],
-                    [b[0].radius, b[1].radius],
-                )
-                .is_none_or(|c| c.penetration - p.rest_overlap <= tolerance)
-            })
-        })
-        .collect()
-}
-
 #[test]
 fn teaser_noise_free() {
     let run = track("teaser", "none", 600);
@@ -112,7 +77,11 @@ fn teaser_noise_free() {
     assert_eq!(s.frames, 600);
     assert!(s.mean < 3.0, "mean keypoint error {} mm", s.mean);
     let template = sequence("teaser", "none", 1).template().clone();
-    let possible = possible_truth(&template, &run, 5.0);
+    let possible: Vec<bool> = run
+        .truth
+        .iter()
+        .map(|t| max_penetration(&template, &t.pose) <= 5.0)
+        .collect();
     let under = |frames: &[usize]| {
         let n = frames
             .iter()

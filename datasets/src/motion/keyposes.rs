@@ -89,7 +89,10 @@ pub enum KeyPose {
     /// Fingers pressed side by side (adducted: neighbouring fingers in contact), thumb along the
     /// index.
     Adducted,
-    /// A clenched fist, thumb wrapped over the middle phalanges of index and middle.
+    /// A clenched fist, thumb wrapped over the middle phalanges of index and middle. (The thumb
+    /// values keep every pair of finger pills of the default template within 1 mm of touching —
+    /// an earlier version sank the thumb 16 mm into the fingers, a ground truth no tracker with
+    /// a collision term could reach; checked in `eval/tests/ground_truth.rs`.)
     Fist,
     /// Index extended, other fingers curled, thumb over the middle finger.
     Point,
@@ -224,8 +227,8 @@ impl KeyPose {
                     ("index_mcp_flex", 0.05),
                     ("index_pip_flex", 0.05),
                     ("index_dip_flex", 0.02),
-                    ("thumb_cmc_abd", -0.2),
-                    ("thumb_cmc_flex", 0.6),
+                    ("thumb_cmc_abd", -0.05),
+                    ("thumb_cmc_flex", 0.5),
                 ],
             ),
             KeyPose::Victory => set(
@@ -239,8 +242,8 @@ impl KeyPose {
                     ("middle_mcp_flex", 0.05),
                     ("middle_pip_flex", 0.05),
                     ("middle_dip_flex", 0.02),
-                    ("thumb_cmc_abd", -0.35),
-                    ("thumb_cmc_flex", 0.85),
+                    ("thumb_cmc_abd", -0.2),
+                    ("thumb_cmc_flex", 0.8),
                     ("thumb_mcp_flex", 0.6),
                 ],
             ),
@@ -388,10 +391,10 @@ fn fist() -> Articulation {
     set(
         Articulation::zeros(),
         &[
-            ("thumb_cmc_abd", -0.25),
-            ("thumb_cmc_flex", 0.7),
-            ("thumb_mcp_flex", 0.75),
-            ("thumb_ip_flex", 0.45),
+            ("thumb_cmc_abd", 0.15),
+            ("thumb_cmc_flex", 1.0),
+            ("thumb_mcp_flex", 0.7),
+            ("thumb_ip_flex", 0.4),
             ("index_mcp_abd", -0.02),
             ("ring_mcp_abd", 0.03),
             ("pinky_mcp_abd", 0.08),
