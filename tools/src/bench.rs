@@ -390,10 +390,16 @@ pub fn run(args: BenchArgs) -> Result<()> {
         let bar = frames_bar(Some(args.frames), &format!("bench: {} 1 thread", m.name()));
         let s = track_all(built.tracker(m)?.as_mut(), &first, &bar);
         bar.finish_and_clear();
+        // A model that Ctrl-C stopped before its first frame has nothing to show.
+        if s.track.is_empty() {
+            break;
+        }
         report.single_thread.push(single_thread(m, &s, baseline_us));
         singles.push(s);
     }
-    println!("{}", single_thread_table(&report));
+    if !report.single_thread.is_empty() {
+        println!("{}", single_thread_table(&report));
+    }
 
     if !crate::interrupt::requested() {
         let second = record(
@@ -404,11 +410,16 @@ pub fn run(args: BenchArgs) -> Result<()> {
             "bench: second sequence",
         )?;
         for (&m, single) in models.iter().zip(&singles) {
-            report
-                .two_cores
-                .push(two_cores(&built, m, [&first, &second], single)?);
+            let c = two_cores(&built, m, [&first, &second], single)?;
+            // Cut short by Ctrl-C, the two runs did unequal work: no speed-up to report.
+            if crate::interrupt::requested() {
+                break;
+            }
+            report.two_cores.push(c);
         }
-        println!("{}", two_cores_table(&report));
+        if !report.two_cores.is_empty() {
+            println!("{}", two_cores_table(&report));
+        }
     }
 
     if models.contains(&Model::SphereMesh) && !crate::interrupt::requested() {
