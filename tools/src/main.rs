@@ -1,5 +1,6 @@
 //! The `hands` command-line interface (DESIGN.md "CLI surface").
 
+mod bench;
 mod convert;
 mod demo;
 mod interrupt;
@@ -59,6 +60,9 @@ enum Command {
         after_help = "Example: hands prior build --animbank animbank.pose --out pose-prior.json"
     )]
     Prior(prior::PriorCommand),
+    /// Measure the trackers' speed: per-stage medians on one thread, two cores, point counts.
+    #[command(after_help = "Example: hands bench --model all --frames 240 --json bench.json")]
+    Bench(bench::BenchArgs),
 }
 
 fn main() -> anyhow::Result<()> {
@@ -72,5 +76,6 @@ fn main() -> anyhow::Result<()> {
         Command::Track(args) => track::run(args),
         Command::Report(args) => report::run(args),
         Command::Prior(cmd) => prior::run(cmd),
+        Command::Bench(args) => bench::run(args),
     }
 }

@@ -27,6 +27,14 @@ fn tmp(name: &str) -> PathBuf {
     d
 }
 
+/// `hands args` must fail with a message containing `needle`, without a panic.
+fn assert_fails_clearly(args: &[&str], needle: &str) {
+    let (ok, text) = hands(args);
+    assert!(!ok, "{args:?} succeeded");
+    assert!(text.contains(needle), "{args:?}: {text}");
+    assert!(!text.contains("panicked"), "{args:?} panicked: {text}");
+}
+
 /// `hands synth` of `frames` teaser frames into `seq` (a folder or an `.mcap`).
 fn synth_teaser(seq: &std::path::Path, frames: usize) {
     let frames = frames.to_string();
@@ -254,10 +262,7 @@ fn bad_inputs_fail_clearly() {
     ];
     for (args, needle) in cases {
         let refs: Vec<&str> = args.iter().map(|s| s.as_str()).collect();
-        let (ok, text) = hands(&refs);
-        assert!(!ok, "{args:?} succeeded");
-        assert!(text.contains(needle), "{args:?}: {text}");
-        assert!(!text.contains("panicked"), "{args:?} panicked: {text}");
+        assert_fails_clearly(&refs, needle);
     }
 }
 
@@ -480,4 +485,56 @@ fn report_ch3_runs_on_a_few_frames() {
         assert!(d.join(format!("{svg}.svg")).exists(), "{svg} missing");
     }
     assert!(md.contains("| `calibration` |"), "every motion is compared");
+}
+
+#[test]
+fn bench_writes_positive_medians_as_json() {
+    let d = tmp("bench");
+    let json = d.join("bench.json");
+    let (ok, text) = hands(&[
+        "bench",
+        "--frames",
+        "10",
+        "--json",
+        json.to_str().expect("utf8"),
+    ]);
+    assert!(ok, "{text}");
+    assert!(text.contains("thesis (quoted"), "{text}");
+    let v: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&json).expect("bench.json")).expect("json");
+    let positive = |x: &serde_json::Value| x.as_f64().is_some_and(|x| x > 0.0 && x.is_finite());
+    assert!(positive(&v["baseline_us"]), "{v}");
+    let singles = v["single_thread"].as_array().expect("single_thread");
+    assert_eq!(singles.len(), 2, "both models by default");
+    for s in singles {
+        for stage in ["correspondences_us", "solve_us", "track_us"] {
+            assert!(positive(&s["per_frame"][stage]), "{stage}: {s}");
+            assert!(positive(&s["per_iteration"][stage]), "{stage}: {s}");
+            assert!(s["per_frame"]["other_us"].is_f64(), "{s}");
+        }
+        assert!(positive(&s["frames_per_s"]) && positive(&s["ratio_to_baseline"]));
+    }
+    for c in v["two_cores"].as_array().expect("two_cores") {
+        assert!(positive(&c["sequential_frames_per_s"]) && positive(&c["parallel_frames_per_s"]));
+        assert!(positive(&c["speedup"]), "{c}");
+    }
+    let rows = v["scaling"]["rows"].as_array().expect("scaling rows");
+    assert_eq!(rows.len(), 6, "500 to 20000 points");
+    assert!(rows.iter().all(|r| positive(&r["track_ms_median"])), "{v}");
+    assert_eq!(v["interrupted"], false);
+}
+
+#[test]
+fn bench_rejects_bad_arguments_clearly() {
+    for (args, needle) in [
+        (vec!["bench", "--model", "voxels"], "voxels"),
+        (vec!["bench", "--frames", "0"], "--frames"),
+        (vec!["bench", "--noise", "laser", "--frames", "2"], "laser"),
+        (
+            vec!["bench", "--json", "/no/such/dir/b.json"],
+            "/no/such/dir",
+        ),
+    ] {
+        assert_fails_clearly(&args, needle);
+    }
 }
