@@ -51,7 +51,13 @@ fn motions_rarely_interpenetrate() {
             .count();
         let share = deep as f64 / frames.max(1) as f64;
         println!("{name}: {deep}/{frames} frames deeper than 5 mm");
-        let checked = ["teaser", "fist", "rotating_fist", "occlusion", "leave_reenter"];
+        let checked = [
+            "teaser",
+            "fist",
+            "rotating_fist",
+            "occlusion",
+            "leave_reenter",
+        ];
         if share > 0.02 && checked.contains(&name) {
             bad.push((name, share));
         }

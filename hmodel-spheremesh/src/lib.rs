@@ -17,6 +17,22 @@
 //!   ([`hand_model::solver::FrameLoop`]), one DESIGN.md record per frame;
 //! - [`synthetic`]: frames rendered from a posed template for tests and benchmarks.
 //!
+//! # Choices where the thesis is silent or the originals differ
+//! - E_d2m is not divided by `|D|` (as in hmodel's code), and its ℓ1 norm is IRLS with htrack's
+//!   effective gain 12.25 ([`hand_model::solver::IrlsParams`]); the residual is along `p − q`
+//!   (hmodel), which for front-facing substitutes pulls the silhouette point toward the data.
+//! - The front-facing test uses the sensor's pinhole ([`FrontFacingView::Perspective`], exact
+//!   viewing rays); the thesis' orthographic camera is [`FrontFacingView::Orthographic`]. The
+//!   object-space silhouette is orthographic either way (§3.3.1).
+//! - E_m2d renders every pixel outside the sensor silhouette at the sensor resolution (QVGA);
+//!   pixels are found through conservative per-element screen footprints, so the cost follows
+//!   the part of the model outside the silhouette ([`hand_model::render::DepthRenderer::render_hits`]).
+//! - Collisions: finger pills only, rest-pose overlaps tolerated, hmodel's under-relaxation
+//!   `fraction` left out (it makes the rows inconsistent with the energy; LM damping limits the
+//!   step instead).
+//! - Priors: τ_pose = 1e4 on the project's PCA prior, joint limits 1e7, htrack's temporal
+//!   weights (3, 3; hmodel used 0.05) and uniform damping λ = 100 (shared with Ch. 2).
+//!
 //! # Example
 //! ```
 //! use hand_model::solver::PcaPrior;
