@@ -8,6 +8,27 @@
 //! ([`hmodel_spheremesh::synthetic::rendered_frame`]). Run with
 //! `cargo bench -p hmodel-spheremesh --bench track_frame`; besides criterion's estimates it
 //! prints the medians of the tracker's own per-stage timings (`timing_us`).
+//!
+//! # Measured (issue 5)
+//! One core of the 2-core build machine (idle), criterion medians, 2407 points, 1 rigid + 7
+//! iterations:
+//!
+//! | stage                                            | this code        | thesis (i7 + GTX 980) |
+//! |--------------------------------------------------|------------------|-----------------------|
+//! | `frame` (m2d by rendering, the default)          | 7.89 ms          | —                     |
+//! | `frame_m2d_stride2`                              | 6.84 ms          | —                     |
+//! | `frame_m2d_centers` (§3.6 alternative)           | 4.81 ms          | —                     |
+//! | `frame_plain_closest_points` (centers, no Fig. 3.9) | 4.59 ms       | —                     |
+//! | one context update, plain closest points         | 373 µs           | 250 µs/iter           |
+//! | + front-facing (Fig. 3.9, silhouette included)   | +61 µs (434 µs)  | +100 µs + 150 µs      |
+//! | + m2d rendering of the pixels outside S_s        | +410 µs (844 µs) | 500 µs/iter           |
+//! | solve per iteration (terms, Cholesky)            | ≈ 175 µs         | —                     |
+//!
+//! Before this issue's optimizations the frame took 12.8 ms (tiled rendering of the outside
+//! pixels 2.68 ms per update, unseeded front-facing 1.36 ms): conservative per-element screen
+//! footprints for the m2d pixels and seeded correspondence searches brought it to 7.9 ms. The
+//! goal of ≤ 1.5 ms per frame is **not** reached: per iteration the closest-point search costs
+//! ≈ 150 ns per point and the outside-silhouette rendering ≈ 0.4 ms.
 
 use std::hint::black_box;
 
