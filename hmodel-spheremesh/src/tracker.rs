@@ -12,9 +12,9 @@ use hand_model::solver::terms::{
     JointLimits, JointLimitsParams, PosePrior, PosePriorParams, Temporal, TemporalParams,
 };
 use hand_model::solver::{
-    placement_directions, sphere_mesh_points, EnergyTerm, FrameLoop, FrameStats, IrlsParams,
-    IterInfo, LmCallback, LmError, LmOptions, LmSolver, LmWorkspace, LossParams, NormalEquations,
-    PcaPrior, TermError, TermStats, TrackingProblem,
+    placement_directions, sphere_mesh_points, timed_solve, EnergyTerm, FrameLoop, FrameStats,
+    IrlsParams, LmError, LmOptions, LmSolver, LmWorkspace, LossParams, NoTerm, PcaPrior,
+    PriorSetup, SolveTiming, TrackingProblem,
 };
 use hand_model::spheremesh::{PosedSphereMesh, SphereMeshTemplate};
 use nalgebra::{Vector2, Vector3};
@@ -152,22 +152,6 @@ pub enum TrackerError {
     Model(#[from] hand_model::ModelError),
 }
 
-/// A term that adds nothing: fills the unused slots of the per-frame term list.
-struct NoTerm;
-
-impl EnergyTerm<TrackingCtx<'_>> for NoTerm {
-    fn name(&self) -> &'static str {
-        "none"
-    }
-    fn accumulate(
-        &self,
-        _: &TrackingCtx<'_>,
-        _: &mut NormalEquations,
-    ) -> Result<TermStats, TermError> {
-        Ok(TermStats::ZERO)
-    }
-}
-
 /// Most terms of one solve.
 const MAX_TERMS: usize = 8;
 
@@ -209,25 +193,6 @@ impl Terms {
     }
 }
 
-/// The timed [`CorrespondenceCallback`].
-struct TimedCallback {
-    correspondences_us: f64,
-}
-
-impl LmCallback<TrackingCtx<'_>> for TimedCallback {
-    fn prepare(
-        &mut self,
-        pose: &Pose,
-        ctx: &mut TrackingCtx<'_>,
-        info: IterInfo,
-    ) -> Result<(), TermError> {
-        let t = Instant::now();
-        let r = CorrespondenceCallback.prepare(pose, ctx, info);
-        self.correspondences_us += t.elapsed().as_secs_f64() * 1e6;
-        r
-    }
-}
-
 /// The solve of one frame, as [`FrameLoop`] drives it.
 struct Problem<'m> {
     ctx: TrackingCtx<'m>,
@@ -235,26 +200,23 @@ struct Problem<'m> {
     ws: LmWorkspace,
     terms: Terms,
     mean_pose: Pose,
-    correspondences_us: f64,
-    solve_us: f64,
+    timing: SolveTiming,
 }
 
 impl TrackingProblem for Problem<'_> {
     fn solve(&mut self, pose: &mut Pose) -> bool {
         let (list, n) = self.terms.list();
-        let mut cb = TimedCallback {
-            correspondences_us: 0.0,
-        };
-        let t = Instant::now();
         let sk = &self.ctx.template().skeleton;
-        let result = self
-            .solver
-            .solve(&mut self.ws, sk, pose, &mut self.ctx, &list[..n], &mut cb);
-        let total = t.elapsed().as_secs_f64() * 1e6;
-        self.correspondences_us += cb.correspondences_us;
-        self.solve_us += total - cb.correspondences_us;
-        let finite = pose.values.iter().all(|v| v.is_finite());
-        matches!(result, Ok(r) if r.termination.was_successful()) && finite
+        timed_solve(
+            &self.solver,
+            &mut self.ws,
+            sk,
+            pose,
+            &mut self.ctx,
+            &list[..n],
+            &mut CorrespondenceCallback,
+            &mut self.timing,
+        )
     }
 
     fn refresh(&mut self, pose: &Pose) -> bool {
@@ -333,18 +295,12 @@ impl<'m> Tracker<'m> {
         ctx.set_front_facing(config.front_facing);
         ctx.set_m2d(config.enabled.m2d.then_some(config.m2d_mode));
         ctx.set_m2d_stride(config.m2d_stride);
-        let pose_prior = prior
-            .map(|p| PosePrior::new(sk, p, &config.pose_prior))
-            .transpose()?;
-        let num_aux = pose_prior.as_ref().map_or(0, PosePrior::num_aux);
-        let solver = LmSolver::new(sk, num_aux, config.lm.clone())?;
+        let PriorSetup {
+            prior: pose_prior,
+            solver,
+            mean_pose,
+        } = PriorSetup::new::<TrackerError>(sk, prior, &config.pose_prior, &config.lm)?;
         let ws = solver.workspace();
-        let mut mean_pose = Pose::zeros(sk);
-        for g in prior.iter().flat_map(|p| &p.groups) {
-            for (name, &m) in g.dofs.iter().zip(&g.mean) {
-                mean_pose.set(sk, name, m)?;
-            }
-        }
         let terms = Terms {
             enabled: config.enabled.clone(),
             d2m: D2m::new(config.d2m.clone()),
@@ -364,8 +320,7 @@ impl<'m> Tracker<'m> {
                 ws,
                 terms,
                 mean_pose,
-                correspondences_us: 0.0,
-                solve_us: 0.0,
+                timing: SolveTiming::default(),
             },
             config,
         })
@@ -414,8 +369,7 @@ impl<'m> Tracker<'m> {
             },
             ..HandRecord::default()
         };
-        self.problem.correspondences_us = 0.0;
-        self.problem.solve_us = 0.0;
+        self.problem.timing = SolveTiming::default();
         let n = frame.points.len();
         if n >= self.frames.loss().min_points.max(1) {
             self.problem.ctx.set_frame(frame);
@@ -448,8 +402,9 @@ impl<'m> Tracker<'m> {
             .map(|k| [k.x, k.y, k.z])
             .collect();
         rec.timing_us
-            .insert("correspondences".into(), self.problem.correspondences_us);
-        rec.timing_us.insert("solve".into(), self.problem.solve_us);
+            .insert("correspondences".into(), self.problem.timing.callback_us);
+        rec.timing_us
+            .insert("solve".into(), self.problem.timing.solve_us);
         rec.timing_us
             .insert("track".into(), start.elapsed().as_secs_f64() * 1e6);
         rec

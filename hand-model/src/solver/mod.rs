@@ -74,6 +74,7 @@ mod loss;
 mod normal_equations;
 mod pca;
 mod points;
+mod setup;
 mod term;
 pub mod terms;
 
@@ -95,4 +96,5 @@ pub use pca::{
     PCA_PRIOR_FORMAT, PCA_PRIOR_VERSION, PCA_VARIANCE_FLOOR,
 };
 pub use points::{cylinder_points, skeleton_points, sphere_mesh_points, KinematicPoint};
+pub use setup::{timed_solve, NoTerm, PriorSetup, SolveTiming};
 pub use term::{EnergyTerm, PoseContext, SkeletonCtx, TermError};
