@@ -360,15 +360,7 @@ impl<'m> Tracker<'m> {
     /// pose (see [`FrameLoop::step`]).
     pub fn track(&mut self, frame: &PreprocessedFrame, index: u64, timestamp: f64) -> HandRecord {
         let start = Instant::now();
-        let mut rec = HandRecord {
-            frame: index,
-            timestamp: if timestamp.is_finite() {
-                timestamp
-            } else {
-                0.0
-            },
-            ..HandRecord::default()
-        };
+        let mut rec = HandRecord::for_frame(index, timestamp);
         self.problem.timing = SolveTiming::default();
         let n = frame.points.len();
         if n >= self.frames.loss().min_points.max(1) {
@@ -378,11 +370,14 @@ impl<'m> Tracker<'m> {
         rec.flags = outcome.flags.iter().map(|f| f.to_string()).collect();
         if let Some(stats) = &outcome.stats {
             rec.iterations = Some(self.problem.ws.report().iterations as u32);
-            for t in &self.problem.ws.report().terms {
-                if t.energy.is_finite() {
-                    *rec.energies.entry(t.name.to_string()).or_default() += t.energy;
-                }
-            }
+            rec.add_energies(
+                self.problem
+                    .ws
+                    .report()
+                    .terms
+                    .iter()
+                    .map(|t| (t.name, t.energy)),
+            );
             rec.energies
                 .insert("mean_distance_mm".into(), stats.mean_distance);
         }
@@ -392,15 +387,14 @@ impl<'m> Tracker<'m> {
             // Cannot fail: the term's points are on this template's bones.
             let _ = self.problem.terms.temporal.push_frame(&self.posed.skeleton);
         }
-        for (dof, v) in self.template.skeleton.dofs().iter().zip(&pose.values) {
-            rec.pose.insert(dof.name.clone(), *v);
-        }
-        rec.keypoints = self
-            .posed
-            .keypoints(self.template)
+        let names = self
+            .template
+            .skeleton
+            .dofs()
             .iter()
-            .map(|k| [k.x, k.y, k.z])
-            .collect();
+            .map(|d| d.name.as_str());
+        rec.set_pose(names, &pose.values, &self.posed.keypoints(self.template));
+
         rec.timing_us
             .insert("correspondences".into(), self.problem.timing.callback_us);
         rec.timing_us

@@ -368,15 +368,7 @@ impl<'m> Tracker<'m> {
     /// the previous pose (`solver_failed`); see [`FrameLoop::step`].
     pub fn track(&mut self, frame: &PreprocessedFrame, index: u64, timestamp: f64) -> HandRecord {
         let start = Instant::now();
-        let mut rec = HandRecord {
-            frame: index,
-            timestamp: if timestamp.is_finite() {
-                timestamp
-            } else {
-                0.0
-            },
-            ..HandRecord::default()
-        };
+        let mut rec = HandRecord::for_frame(index, timestamp);
         self.problem.timing = SolveTiming::default();
         let n = frame.points.len();
         if n >= self.frames.loss().min_points.max(1) {
@@ -386,11 +378,14 @@ impl<'m> Tracker<'m> {
         rec.flags = outcome.flags.iter().map(|f| f.to_string()).collect();
         if let Some(stats) = &outcome.stats {
             rec.iterations = Some(self.problem.ws.report().iterations as u32);
-            for t in &self.problem.ws.report().terms {
-                if t.energy.is_finite() {
-                    *rec.energies.entry(t.name.to_string()).or_default() += t.energy;
-                }
-            }
+            rec.add_energies(
+                self.problem
+                    .ws
+                    .report()
+                    .terms
+                    .iter()
+                    .map(|t| (t.name, t.energy)),
+            );
             rec.energies
                 .insert("mean_distance_mm".into(), stats.mean_distance);
         }
@@ -400,15 +395,9 @@ impl<'m> Tracker<'m> {
             // Cannot fail: the term's points are on this model's bones.
             let _ = self.problem.terms.temporal.push_frame(&self.posed);
         }
-        for (name, v) in self.model.skeleton.dofs().iter().zip(&pose.values) {
-            rec.pose.insert(name.name.clone(), *v);
-        }
-        rec.keypoints = self
-            .model
-            .keypoints(&self.posed)
-            .iter()
-            .map(|k| [k.x, k.y, k.z])
-            .collect();
+        let names = self.model.skeleton.dofs().iter().map(|d| d.name.as_str());
+        rec.set_pose(names, &pose.values, &self.model.keypoints(&self.posed));
+
         let timing = self.problem.timing;
         rec.timing_us
             .insert("correspondences".into(), timing.callback_us);

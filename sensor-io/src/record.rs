@@ -39,6 +39,42 @@ pub struct HandRecord {
 }
 
 impl HandRecord {
+    /// An empty record of frame `index` at `timestamp` (s; a non-finite one is written as 0).
+    pub fn for_frame(index: u64, timestamp: f64) -> Self {
+        Self {
+            frame: index,
+            timestamp: if timestamp.is_finite() {
+                timestamp
+            } else {
+                0.0
+            },
+            ..Self::default()
+        }
+    }
+
+    /// Add per-term energies, summing repeated names and skipping non-finite values (a record
+    /// never holds NaN).
+    pub fn add_energies<'a>(&mut self, energies: impl IntoIterator<Item = (&'a str, f64)>) {
+        for (name, e) in energies {
+            if e.is_finite() {
+                *self.energies.entry(name.to_string()).or_default() += e;
+            }
+        }
+    }
+
+    /// The pose by DOF name and the keypoints (camera frame, mm).
+    pub fn set_pose<'a>(
+        &mut self,
+        names: impl IntoIterator<Item = &'a str>,
+        values: &[f64],
+        keypoints: &[nalgebra::Vector3<f64>],
+    ) {
+        for (name, v) in names.into_iter().zip(values) {
+            self.pose.insert(name.to_string(), *v);
+        }
+        self.keypoints = keypoints.iter().map(|k| [k.x, k.y, k.z]).collect();
+    }
+
     /// Whether every number is finite (records with NaN are never written).
     pub fn is_finite(&self) -> bool {
         self.timestamp.is_finite()
