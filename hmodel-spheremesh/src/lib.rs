@@ -49,6 +49,7 @@
 //! assert!(record.is_finite() && record.keypoints.len() == 21);
 //! ```
 
+pub mod calibration;
 mod context;
 mod jacobian;
 pub mod synthetic;

@@ -1,0 +1,12 @@
+//! Offline multi-frame calibration of the sphere-mesh template (thesis §3.4): the shape
+//! unknowns and their Jacobians ([`ShapeSpace`]) and the joint LM over all frames
+//! ([`calibrate`]).
+
+mod shape;
+mod solve;
+
+pub use shape::{ShapeSpace, ShapeState};
+pub use solve::{
+    calibrate, Calibration, CalibrationConfig, CalibrationError, CalibrationFrame, FrameKind,
+    IterationRecord,
+};

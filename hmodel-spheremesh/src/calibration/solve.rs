@@ -1,0 +1,643 @@
+//! The joint Levenberg–Marquardt calibration over all unknowns (thesis Eq. 3.8): every frame's
+//! pose `θ_n` together with the shape of [`ShapeLayout`], on the energies of §3.4.1 — d2m
+//! (Eq. 3.11) and, for depth frames, m2d (Eq. 3.12) through the tracker's own correspondence
+//! and silhouette machinery ([`TrackingCtx`]), validity (Eq. 3.14), radius bounds, joint limits
+//! and a weak prior toward the initial template that fixes the gauge freedoms (a rest rotation
+//! about a joint's own axis is indistinguishable from an offset of that joint's angle in every
+//! frame). Rigidity (Eq. 3.13) holds by construction: every frame is the template posed by
+//! forward kinematics, so its segments keep their rest lengths exactly.
+//!
+//! The system is dense (`N·#θ + #shape` ≈ 500 unknowns for 8 frames) and solved by Cholesky;
+//! steps are accepted only when the energy decreases (true LM, λ adapted).
+
+use std::time::Instant;
+
+use hand_model::kinematics::Pose;
+use hand_model::query::{project_point_pill, View};
+use hand_model::shape::Element;
+use hand_model::solver::{IrlsParams, NormalEquations};
+use hand_model::spheremesh::{PosedSphereMesh, SphereMeshTemplate};
+use nalgebra::{DMatrix, DVector, Vector3};
+use sensor_io::preprocess::PreprocessedFrame;
+use sensor_io::SensorView;
+use serde::{Deserialize, Serialize};
+
+use super::shape::{ShapeSpace, ShapeState};
+use crate::context::TrackingCtx;
+use crate::jacobian::{FootpointJacobian, MAX_ELEMENT_DOFS};
+
+/// What a calibration frame holds.
+#[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum FrameKind {
+    /// A single depth camera: front-facing correspondences, m2d against the silhouette.
+    Depth,
+    /// A complete point cloud (multi-view scan): plain closest points.
+    Cloud,
+}
+
+/// One data frame `D_n` of the calibration.
+#[derive(Clone, Debug)]
+pub struct CalibrationFrame {
+    /// The points (camera frame, mm).
+    pub points: Vec<Vector3<f64>>,
+    /// For depth frames: the camera and silhouette distance transform (m2d).
+    pub sensor: SensorView,
+    /// The kind of data.
+    pub kind: FrameKind,
+}
+
+impl CalibrationFrame {
+    /// A depth frame from the preprocessing pipeline.
+    pub fn depth(frame: &PreprocessedFrame) -> Self {
+        let mut sensor = SensorView::default();
+        sensor.set_frame(frame);
+        Self {
+            points: frame.points.clone(),
+            sensor,
+            kind: FrameKind::Depth,
+        }
+    }
+
+    /// A complete point cloud.
+    pub fn cloud(points: Vec<Vector3<f64>>) -> Self {
+        Self {
+            points,
+            sensor: SensorView::default(),
+            kind: FrameKind::Cloud,
+        }
+    }
+}
+
+/// Weights and stopping rule of the calibration (thesis §3.6 "Reproducibility": τ_d2m = 1,
+/// τ_m2d = 0.5, τ_valid = 1e2).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct CalibrationConfig {
+    /// Most LM iterations (accepted or not).
+    pub iterations: usize,
+    /// τ_d2m per point (squared distance, mm²).
+    pub d2m: f64,
+    /// τ_m2d per pushed pixel (squared pixels).
+    pub m2d: f64,
+    /// τ_valid (Eq. 3.14), per mm².
+    pub valid: f64,
+    /// Optimize the rest orientations of the kinematic frames `T̄` (Fig. 3.8; joint positions
+    /// are part of β).
+    pub kinematic: bool,
+    /// Also free per-sphere center offsets and radii beyond the β space ([`ShapeSpace`]).
+    pub free_spheres: bool,
+    /// Prior toward the initial template on rest rotations (per rad²).
+    pub prior_rotation: f64,
+    /// Prior toward the initial template on β (per mm²).
+    pub prior_beta: f64,
+    /// Prior toward zero on the free sphere offsets and radii (per mm²).
+    pub prior_free: f64,
+    /// Radius bounds (mm) of every sphere.
+    pub radius_limits: [f64; 2],
+    /// Weight of the radius bounds and of the joint limits of every `θ_n`.
+    pub limits: f64,
+    /// Initial LM damping (relative to the diagonal).
+    pub lambda: f64,
+    /// Stop when an accepted step lowers the energy by less than this fraction.
+    pub tolerance: f64,
+}
+
+impl Default for CalibrationConfig {
+    fn default() -> Self {
+        Self {
+            iterations: 30,
+            d2m: 1.0,
+            m2d: 0.5,
+            valid: 1e2,
+            kinematic: true,
+            free_spheres: false,
+            prior_rotation: 1e3,
+            prior_beta: 1e-2,
+            prior_free: 10.0,
+            radius_limits: [1.5, 30.0],
+            limits: 1e5,
+            lambda: 1e-3,
+            tolerance: 1e-6,
+        }
+    }
+}
+
+/// One LM iteration of the calibration.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct IterationRecord {
+    /// Total energy at the candidate.
+    pub energy: f64,
+    /// Its d2m part.
+    pub d2m: f64,
+    /// Its m2d part.
+    pub m2d: f64,
+    /// Its validity part.
+    pub valid: f64,
+    /// The damping used.
+    pub lambda: f64,
+    /// Whether the step was accepted.
+    pub accepted: bool,
+    /// Wall time (ms).
+    pub ms: f64,
+}
+
+/// The calibrated template, the frames' poses and how the optimization went.
+#[derive(Clone, Debug)]
+pub struct Calibration {
+    /// The calibrated template.
+    pub template: SphereMeshTemplate,
+    /// Per frame its pose.
+    pub poses: Vec<Pose>,
+    /// Energy of the initial guess.
+    pub initial_energy: f64,
+    /// Every iteration.
+    pub iterations: Vec<IterationRecord>,
+    /// Total wall time (s).
+    pub seconds: f64,
+}
+
+/// Why a calibration could not run.
+#[derive(Debug, thiserror::Error)]
+pub enum CalibrationError {
+    /// Frames and poses differ in number, or there is no frame.
+    #[error("{0}")]
+    Input(String),
+    /// The template cannot be tracked (its geometry or Jacobians).
+    #[error("template: {0}")]
+    Template(#[from] hand_model::ModelError),
+}
+
+/// A sparse row assembled in a dense scratch vector.
+struct Row {
+    values: Vec<f64>,
+    touched: Vec<usize>,
+    pairs: Vec<(usize, f64)>,
+}
+
+impl Row {
+    fn new(n: usize) -> Self {
+        Self {
+            values: vec![0.0; n],
+            touched: Vec::new(),
+            pairs: Vec::new(),
+        }
+    }
+
+    fn add(&mut self, i: usize, v: f64) {
+        if self.values[i] == 0.0 && !self.touched.contains(&i) {
+            self.touched.push(i);
+        }
+        self.values[i] += v;
+    }
+
+    /// Add the row to `ne` and reset; returns the energy `w r²`.
+    fn flush(&mut self, ne: &mut NormalEquations, r: f64, w: f64) -> f64 {
+        self.pairs.clear();
+        for &i in &self.touched {
+            self.pairs.push((i, self.values[i]));
+            self.values[i] = 0.0;
+        }
+        self.touched.clear();
+        ne.add_row(&self.pairs, r, w).map_or(0.0, |s| s.energy)
+    }
+}
+
+/// Energies of one linearization, by part.
+#[derive(Clone, Copy, Debug, Default)]
+struct Parts {
+    d2m: f64,
+    m2d: f64,
+    valid: f64,
+    rest: f64,
+}
+
+impl Parts {
+    fn total(&self) -> f64 {
+        self.d2m + self.m2d + self.valid + self.rest
+    }
+}
+
+/// The state being optimized.
+#[derive(Clone)]
+struct State {
+    shape: ShapeState,
+    template: SphereMeshTemplate,
+    poses: Vec<Pose>,
+}
+
+struct Problem<'a> {
+    base: &'a SphereMeshTemplate,
+    frames: &'a [CalibrationFrame],
+    space: ShapeSpace,
+    initial: ShapeState,
+    /// `(element, sphere slot)` pairs degenerate already in the initial template.
+    exempt: Vec<(usize, usize)>,
+    jacobian: FootpointJacobian,
+    config: &'a CalibrationConfig,
+    nd: usize,
+}
+
+impl Problem<'_> {
+    fn dim(&self) -> usize {
+        self.frames.len() * self.nd + self.space.len()
+    }
+
+    fn shape_offset(&self) -> usize {
+        self.frames.len() * self.nd
+    }
+
+    /// Linearize every energy at `state`.
+    fn linearize(&self, state: &State) -> Result<(NormalEquations, Parts), CalibrationError> {
+        let n = self.dim();
+        let so = self.shape_offset();
+        let mut ne = NormalEquations::new(n);
+        let mut row = Row::new(n);
+        let mut parts = Parts::default();
+        let t = &state.template;
+        let plain = IrlsParams {
+            reweight: false,
+            ..IrlsParams::default()
+        };
+        let mut cols = [Vector3::zeros(); MAX_ELEMENT_DOFS];
+        for (f, (frame, pose)) in self.frames.iter().zip(&state.poses).enumerate() {
+            let view = View::Perspective {
+                camera_center: Vector3::zeros(),
+            };
+            let mut ctx = TrackingCtx::new(t, view, plain.clone())?;
+            ctx.set_points(&frame.points);
+            *ctx.sensor_mut() = frame.sensor.clone();
+            ctx.set_front_facing(frame.kind == FrameKind::Depth);
+            ctx.set_m2d((frame.kind == FrameKind::Depth).then_some(crate::M2dMode::Render));
+            if ctx.update(pose, false).is_err() {
+                return Err(CalibrationError::Input(format!(
+                    "frame {f}: the posed template is not finite"
+                )));
+            }
+            let posed = ctx.posed_mesh().clone();
+            let theta = f * self.nd;
+            // d2m (Eq. 3.11): r = −‖p − q‖, row uᵀ∂q.
+            for ((c, u), &r) in ctx
+                .correspondences()
+                .iter()
+                .zip(ctx.directions())
+                .zip(ctx.residuals())
+            {
+                let Some(c) = c else { continue };
+                let dofs = self.jacobian.columns(
+                    &posed,
+                    c.element as usize,
+                    &c.spheres,
+                    &c.weights,
+                    &mut cols,
+                );
+                for (&d, col) in dofs.iter().zip(&cols) {
+                    row.add(theta + d, u.dot(col));
+                }
+                let un = u.dot(&c.normal);
+                for (&s, &w) in c.spheres.iter().zip(&c.weights) {
+                    if w == 0.0 {
+                        continue;
+                    }
+                    self.space.for_each_sphere_column(
+                        t,
+                        &posed,
+                        s as usize,
+                        w,
+                        &mut |i, dc, dr| {
+                            row.add(so + i, u.dot(&dc) + un * dr);
+                        },
+                    );
+                }
+                parts.d2m += row.flush(&mut ne, r, self.config.d2m);
+            }
+            // m2d (Eq. 3.12): two pixel rows per push.
+            if let Some(camera) = frame.sensor.camera.as_ref() {
+                let w = self.config.m2d * ctx.m2d_pixel_weight();
+                for push in ctx.pushes() {
+                    let x = &push.point;
+                    let res = camera.project(x) - push.target;
+                    let jp = camera.projection_jacobian(x);
+                    let dofs = self.jacobian.columns(
+                        &posed,
+                        push.element as usize,
+                        &push.spheres,
+                        &push.weights,
+                        &mut cols,
+                    );
+                    let normal = posed_normal(&posed, push);
+                    for axis in 0..2 {
+                        let g = jp.row(axis).transpose();
+                        for (&d, col) in dofs.iter().zip(&cols) {
+                            row.add(theta + d, g.dot(col));
+                        }
+                        let gn = g.dot(&normal);
+                        for (&s, &wt) in push.spheres.iter().zip(&push.weights) {
+                            if wt == 0.0 {
+                                continue;
+                            }
+                            self.space.for_each_sphere_column(
+                                t,
+                                &posed,
+                                s as usize,
+                                wt,
+                                &mut |i, dc, dr| row.add(so + i, g.dot(&dc) + gn * dr),
+                            );
+                        }
+                        parts.m2d += row.flush(&mut ne, res[axis], w);
+                    }
+                }
+            }
+            // Joint limits of θ_n.
+            for (d, dof) in t.skeleton.dofs().iter().enumerate() {
+                let Some([lo, hi]) = dof.limits else { continue };
+                let v = pose.values[d];
+                let r = if v > hi {
+                    v - hi
+                } else if v < lo {
+                    v - lo
+                } else {
+                    continue;
+                };
+                row.add(theta + d, 1.0);
+                parts.rest += row.flush(&mut ne, r, self.config.limits);
+            }
+        }
+        parts.valid += self.validity(t, &mut ne, &mut row);
+        parts.rest += self.shape_priors(state, &mut ne, &mut row);
+        ne.symmetrize();
+        Ok((ne, parts))
+    }
+
+    /// Validity (Eq. 3.14) on the rest template: a sphere center inside the rest of its element
+    /// (the element without that sphere) is pulled to that part's surface, the footpoint held
+    /// fixed; 3 rows per degenerate sphere. Spheres already inside at the initial template
+    /// (the template's own design, e.g. a membrane sphere sunk into a finger base) are exempt:
+    /// the term guards against calibration collapsing elements, not against the template.
+    fn validity(&self, t: &SphereMeshTemplate, ne: &mut NormalEquations, row: &mut Row) -> f64 {
+        let so = self.shape_offset();
+        let rest = PosedSphereMesh::new(t, &Pose::zeros(&t.skeleton));
+        let mut energy = 0.0;
+        for (e, el) in t.elements.iter().enumerate() {
+            for (k, &i) in el.element.spheres().iter().enumerate() {
+                if self.exempt.contains(&(e, k)) {
+                    continue;
+                }
+                let Some(target) = degenerate_target(&el.element, k, &rest.spheres) else {
+                    continue;
+                };
+                let res = rest.spheres[i as usize].center - target;
+                for axis in 0..3 {
+                    self.space.for_each_sphere_column(
+                        t,
+                        &rest,
+                        i as usize,
+                        1.0,
+                        &mut |idx, dc, _| {
+                            row.add(so + idx, dc[axis]);
+                        },
+                    );
+                    energy += row.flush(ne, res[axis], self.config.valid);
+                }
+            }
+        }
+        energy
+    }
+
+    /// Radius bounds and the priors toward the initial template (gauge).
+    fn shape_priors(&self, state: &State, ne: &mut NormalEquations, row: &mut Row) -> f64 {
+        let so = self.shape_offset();
+        let t = &state.template;
+        let rest = PosedSphereMesh::new(t, &Pose::zeros(&t.skeleton));
+        let mut energy = 0.0;
+        let [lo, hi] = self.config.radius_limits;
+        for (s, sphere) in rest.spheres.iter().enumerate() {
+            let r = sphere.radius;
+            let res = if r > hi {
+                r - hi
+            } else if r < lo {
+                r - lo
+            } else {
+                continue;
+            };
+            self.space
+                .for_each_sphere_column(t, &rest, s, 1.0, &mut |i, _, dr| row.add(so + i, dr));
+            energy += row.flush(ne, res, self.config.limits);
+        }
+        let c = self.config;
+        for (j, (b, b0)) in state.shape.beta.iter().zip(&self.initial.beta).enumerate() {
+            row.add(so + j, 1.0);
+            energy += row.flush(ne, b - b0, c.prior_beta);
+        }
+        let mut rotations = 0;
+        for (k, o) in self.space.rotation_slots() {
+            rotations += 1;
+            let w = nalgebra::Rotation3::from_matrix(&state.shape.rotation[k]).scaled_axis();
+            for j in 0..3 {
+                row.add(so + o + j, 1.0);
+                energy += row.flush(ne, w[j], c.prior_rotation);
+            }
+        }
+        let first = self.space.num_beta() + rotations * 3;
+        for (i, &x) in state.shape.free.iter().enumerate() {
+            row.add(so + first + i, 1.0);
+            energy += row.flush(ne, x, c.prior_free);
+        }
+        energy
+    }
+
+    /// Apply the step `delta` to `state`; `None` when the shape leaves the valid templates.
+    fn step(&self, state: &State, delta: &DVector<f64>) -> Option<State> {
+        let so = self.shape_offset();
+        let mut shape_delta: Vec<f64> = delta.as_slice()[so..].to_vec();
+        if !self.config.kinematic {
+            for o in self.space.rotation_offsets() {
+                shape_delta[o..o + 3].fill(0.0);
+            }
+        }
+        let shape = self.space.step(&state.shape, &shape_delta);
+        let template = self.space.template(self.base, &shape).ok()?;
+        let poses = state
+            .poses
+            .iter()
+            .enumerate()
+            .map(|(f, p)| {
+                p.retract(
+                    &self.base.skeleton,
+                    &delta.as_slice()[f * self.nd..(f + 1) * self.nd],
+                )
+            })
+            .collect();
+        Some(State {
+            shape,
+            template,
+            poses,
+        })
+    }
+}
+
+/// When sphere `k` of `element` has its center inside the rest of the element (Eq. 3.14's
+/// `χ`), the closest point of that rest's surface; `None` otherwise.
+fn degenerate_target(
+    element: &Element,
+    k: usize,
+    spheres: &[hand_model::shape::Sphere],
+) -> Option<Vector3<f64>> {
+    let ids = element.spheres();
+    let c = spheres[ids[k] as usize].center;
+    let others: Vec<u32> = ids
+        .iter()
+        .enumerate()
+        .filter(|&(j, _)| j != k)
+        .map(|(_, &s)| s)
+        .collect();
+    match others.as_slice() {
+        [j] => {
+            let o = &spheres[*j as usize];
+            let d = c - o.center;
+            let len = d.norm();
+            (len < o.radius && len > 1e-9).then(|| o.center + d * (o.radius / len))
+        }
+        [j, l] => project_point_pill(&c, &spheres[*j as usize], &spheres[*l as usize])
+            .filter(|p| p.distance < 0.0)
+            .map(|p| p.point),
+        _ => None,
+    }
+}
+
+/// The normal of the element surface at a push point (`q − s` of its interpolated sphere).
+fn posed_normal(posed: &PosedSphereMesh, push: &crate::SilhouettePush) -> Vector3<f64> {
+    let (mut s, mut r) = (Vector3::zeros(), 0.0);
+    for (&i, &w) in push.spheres.iter().zip(&push.weights) {
+        s += posed.spheres[i as usize].center * w;
+        r += posed.spheres[i as usize].radius * w;
+    }
+    let d = push.point - s;
+    if r > 0.0 && d.norm() > 1e-12 {
+        d / d.norm()
+    } else {
+        Vector3::zeros()
+    }
+}
+
+/// Calibrate `base` to `frames` from the initial per-frame poses (thesis Eq. 3.8, joint LM; see
+/// the module docs). Errors: no frame, a pose count or length that does not match, a template
+/// the tracker cannot use.
+pub fn calibrate(
+    base: &SphereMeshTemplate,
+    frames: &[CalibrationFrame],
+    poses: &[Pose],
+    config: &CalibrationConfig,
+) -> Result<Calibration, CalibrationError> {
+    let start = Instant::now();
+    if frames.is_empty() || frames.len() != poses.len() {
+        return Err(CalibrationError::Input(format!(
+            "{} frames and {} initial poses (need the same, at least one)",
+            frames.len(),
+            poses.len()
+        )));
+    }
+    let nd = base.skeleton.num_dofs();
+    if let Some(p) = poses.iter().position(|p| p.values.len() != nd) {
+        return Err(CalibrationError::Input(format!(
+            "pose {p} does not have {nd} values"
+        )));
+    }
+    let space = ShapeSpace::new(base, config.free_spheres)?;
+    let initial = space.identity(base);
+    let rest = PosedSphereMesh::new(base, &Pose::zeros(&base.skeleton));
+    let exempt = base
+        .elements
+        .iter()
+        .enumerate()
+        .flat_map(|(e, el)| (0..el.element.spheres().len()).map(move |k| (e, k, el)))
+        .filter(|(_, k, el)| degenerate_target(&el.element, *k, &rest.spheres).is_some())
+        .map(|(e, k, _)| (e, k))
+        .collect();
+    let problem = Problem {
+        base,
+        frames,
+        jacobian: FootpointJacobian::new(base)?,
+        space,
+        initial: initial.clone(),
+        exempt,
+        config,
+        nd,
+    };
+    let mut state = State {
+        template: problem.space.template(base, &initial)?,
+        shape: initial,
+        poses: poses.to_vec(),
+    };
+    let (mut ne, mut parts) = problem.linearize(&state)?;
+    let initial_energy = parts.total();
+    let mut lambda = config.lambda;
+    let mut records = Vec::new();
+    for _ in 0..config.iterations {
+        let t = Instant::now();
+        let Some(delta) = damped_solve(&ne, lambda) else {
+            lambda *= 10.0;
+            continue;
+        };
+        // A step that breaks the geometry (a negative radius, a non-finite pose) is rejected
+        // like one that raises the energy.
+        let linearized = problem
+            .step(&state, &delta)
+            .map(|c| problem.linearize(&c).map(|l| (c, l)));
+        let Some(Ok((candidate, (cne, cparts)))) = linearized else {
+            records.push(IterationRecord {
+                energy: f64::INFINITY,
+                d2m: f64::INFINITY,
+                m2d: f64::INFINITY,
+                valid: f64::INFINITY,
+                lambda,
+                accepted: false,
+                ms: t.elapsed().as_secs_f64() * 1e3,
+            });
+            lambda *= 4.0;
+            continue;
+        };
+        let accepted = cparts.total().is_finite() && cparts.total() < parts.total();
+        let improvement = (parts.total() - cparts.total()) / parts.total().max(1e-300);
+        records.push(IterationRecord {
+            energy: cparts.total(),
+            d2m: cparts.d2m,
+            m2d: cparts.m2d,
+            valid: cparts.valid,
+            lambda,
+            accepted,
+            ms: t.elapsed().as_secs_f64() * 1e3,
+        });
+        if accepted {
+            state = candidate;
+            ne = cne;
+            parts = cparts;
+            lambda = (lambda / 3.0).max(1e-9);
+            if improvement < config.tolerance {
+                break;
+            }
+        } else {
+            lambda *= 4.0;
+            if lambda > 1e8 {
+                break;
+            }
+        }
+    }
+    Ok(Calibration {
+        template: state.template,
+        poses: state.poses,
+        initial_energy,
+        iterations: records,
+        seconds: start.elapsed().as_secs_f64(),
+    })
+}
+
+/// Solve `(A + λ diag(A) + ε I) δ = b`; `None` when the factorization fails.
+fn damped_solve(ne: &NormalEquations, lambda: f64) -> Option<DVector<f64>> {
+    let mut a: DMatrix<f64> = ne.lhs().clone();
+    for i in 0..a.nrows() {
+        a[(i, i)] += lambda * a[(i, i)] + 1e-9;
+    }
+    let delta = a.cholesky()?.solve(ne.rhs());
+    delta.iter().all(|v| v.is_finite()).then_some(delta)
+}
