@@ -2,8 +2,11 @@
 //! unknowns and their Jacobians ([`ShapeSpace`]) and the joint LM over all frames
 //! ([`calibrate`]).
 
+mod select;
 mod shape;
 mod solve;
+
+pub use select::select_frames;
 
 pub use shape::{ShapeSpace, ShapeState};
 pub use solve::{
