@@ -1,6 +1,7 @@
 //! The `hands` command-line interface (DESIGN.md "CLI surface").
 
 mod bench;
+mod calibrate;
 mod convert;
 mod demo;
 mod interrupt;
@@ -51,6 +52,11 @@ enum Command {
         after_help = "Example: hands track seq.mcap --model spheremesh --out track.jsonl --overlay overlay/"
     )]
     Track(track::TrackArgs),
+    /// Calibrate the sphere-mesh template to a sequence of the user's hand (thesis §3.4).
+    #[command(
+        after_help = "Example: hands calibrate seq.mcap --auto 8 --out me.json --report calib/"
+    )]
+    Calibrate(calibrate::CalibrateArgs),
     /// Write a reproduction report (markdown + SVG plots) from synthetic ground truth.
     #[command(after_help = "Example: hands report ch2 --out docs/ch2 --frames 300")]
     Report(report::ReportArgs),
@@ -74,6 +80,7 @@ fn main() -> anyhow::Result<()> {
         Command::Convert(args) => convert::run(args),
         Command::Synth(args) => synth::run(args),
         Command::Track(args) => track::run(args),
+        Command::Calibrate(args) => calibrate::run(args),
         Command::Report(args) => report::run(args),
         Command::Prior(cmd) => prior::run(cmd),
         Command::Bench(args) => bench::run(args),

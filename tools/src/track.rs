@@ -139,7 +139,7 @@ fn check_flags(args: &TrackArgs) -> Result<()> {
 
 /// A sphere-mesh template: a template `.json` or `subject:<name>` (the `hands synth` subject of
 /// seed 7 applied to the default hand).
-fn load_sphere_mesh(spec: &str) -> Result<SphereMeshTemplate> {
+pub(crate) fn load_sphere_mesh(spec: &str) -> Result<SphereMeshTemplate> {
     if let Some(name) = spec.strip_prefix("subject:") {
         let subject = datasets::subject_by_name(name, 7)?;
         let base = hand_model::spheremesh::default_right_hand();
@@ -186,7 +186,7 @@ fn load_prior(spec: &str) -> Result<Option<PcaPrior>> {
 }
 
 /// Tracker settings from `--config` (any subset of the fields), or the defaults.
-fn read_config<T: DeserializeOwned + Default>(path: Option<&Path>) -> Result<T> {
+pub(crate) fn read_config<T: DeserializeOwned + Default>(path: Option<&Path>) -> Result<T> {
     match path {
         Some(p) => {
             let text =
@@ -283,32 +283,89 @@ pub fn run(args: TrackArgs) -> Result<()> {
 /// The frame loop shared by both trackers: read, preprocess, track, write (and overlay), with
 /// a progress bar, a partial write on Ctrl-C and a summary (timings, flags, ground-truth
 /// errors when the sequence has them).
-fn track_sequence(args: &TrackArgs, tracker: &mut dyn FrameTracker) -> Result<()> {
-    let ext = args.out.extension().and_then(|e| e.to_str());
-    let mut reader = open_sequence(&args.sequence)
-        .with_context(|| format!("opening {}", args.sequence.display()))?;
+/// One frame of a sequence as [`for_each_frame`] hands it over.
+pub(crate) struct SequenceFrame<'a> {
+    /// Position in the sequence.
+    pub position: usize,
+    /// The raw frame.
+    pub frame: &'a sensor_io::Frame,
+    /// Its ground truth, when the sequence has one.
+    pub truth: Option<&'a sensor_io::record::HandRecord>,
+    /// The preprocessed frame.
+    pub pre: &'a PreprocessedFrame,
+    /// Preprocessing time (µs).
+    pub preprocess_us: f64,
+}
+
+/// Read a sequence (folder or `.mcap`), preprocess every frame (segmentation `auto`: depth-only
+/// where the wristband finds no hand) and hand it to `f`, with a progress bar labelled `label`,
+/// stopping after `limit` frames or on Ctrl-C. Returns the number of frames.
+pub(crate) fn for_each_frame(
+    sequence: &Path,
+    segmentation_name: &str,
+    points: usize,
+    limit: Option<usize>,
+    label: &'static str,
+    mut f: impl FnMut(SequenceFrame<'_>) -> Result<()>,
+) -> Result<usize> {
+    let mut reader =
+        open_sequence(sequence).with_context(|| format!("opening {}", sequence.display()))?;
     let camera = reader.camera().clone();
     let mut pre = Preprocessor::new(PreprocessConfig {
-        segmentation: segmentation(&args.segmentation)?,
-        num_points: args.points,
+        segmentation: segmentation(segmentation_name)?,
+        num_points: points,
         ..Default::default()
     });
-    // `auto`: depth-only segmentation for the frames where the wristband finds no hand.
-    let mut fallback = (args.segmentation == "auto").then(|| {
+    let mut fallback = (segmentation_name == "auto").then(|| {
         Preprocessor::new(PreprocessConfig {
             segmentation: Segmentation::DepthOnly(DepthOnlyParams::default()),
-            num_points: args.points,
+            num_points: points,
             ..Default::default()
         })
     });
-    if let Some(dir) = &args.overlay {
-        std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
-    }
-    let total = match (reader.len(), args.frames) {
+    let total = match (reader.len(), limit) {
         (Some(n), Some(m)) => Some(n.min(m)),
         (n, m) => n.or(m),
     };
-    let bar = crate::progress::frames_bar(total, "track");
+    let bar = crate::progress::frames_bar(total, label);
+    let mut frame_pre = PreprocessedFrame::default();
+    let mut frames = 0usize;
+    while let Some(item) = reader.next_frame() {
+        if limit.is_some_and(|m| frames >= m) || crate::interrupt::requested() {
+            break;
+        }
+        let (frame, truth) =
+            item.with_context(|| format!("reading frame {frames} of {}", sequence.display()))?;
+        let t0 = Instant::now();
+        pre.process(&frame, &camera, &mut frame_pre)
+            .with_context(|| format!("preprocessing frame {frames}"))?;
+        if let Some(fb) = fallback.as_mut().filter(|_| frame_pre.hand.count == 0) {
+            fb.process(&frame, &camera, &mut frame_pre)
+                .with_context(|| format!("preprocessing frame {frames}"))?;
+        }
+        f(SequenceFrame {
+            position: frames,
+            frame: &frame,
+            truth: truth.as_ref(),
+            pre: &frame_pre,
+            preprocess_us: t0.elapsed().as_secs_f64() * 1e6,
+        })?;
+        frames += 1;
+        bar.inc(1);
+    }
+    bar.finish_and_clear();
+    Ok(frames)
+}
+
+fn track_sequence(args: &TrackArgs, tracker: &mut dyn FrameTracker) -> Result<()> {
+    let ext = args.out.extension().and_then(|e| e.to_str());
+    if let Some(dir) = &args.overlay {
+        std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+    }
+    let camera = open_sequence(&args.sequence)
+        .with_context(|| format!("opening {}", args.sequence.display()))?
+        .camera()
+        .clone();
     let mut mcap = match ext {
         Some("mcap") => Some(
             McapWriter::create_with_record_topic(&args.out, &camera, TRACK_TOPIC)
@@ -317,59 +374,53 @@ fn track_sequence(args: &TrackArgs, tracker: &mut dyn FrameTracker) -> Result<()
         _ => None,
     };
     let mut lines = String::new();
-    let mut frame_pre = PreprocessedFrame::default();
     let mut stage_us: BTreeMap<String, Vec<f64>> = BTreeMap::new();
     let mut flags: BTreeMap<String, usize> = BTreeMap::new();
-    let (mut errors, mut frames) = (Vec::new(), 0usize);
-    while let Some(item) = reader.next_frame() {
-        if args.frames.is_some_and(|m| frames >= m) || crate::interrupt::requested() {
-            break;
-        }
-        let (frame, truth) =
-            item.with_context(|| format!("reading frame {frames} of {}", args.sequence.display()))?;
-        let t0 = Instant::now();
-        pre.process(&frame, &camera, &mut frame_pre)
-            .with_context(|| format!("preprocessing frame {frames}"))?;
-        if let Some(fb) = fallback.as_mut().filter(|_| frame_pre.hand.count == 0) {
-            fb.process(&frame, &camera, &mut frame_pre)
-                .with_context(|| format!("preprocessing frame {frames}"))?;
-        }
-        let pre_us = t0.elapsed().as_secs_f64() * 1e6;
-        let index = truth.as_ref().map_or(frames as u64, |t| t.frame);
-        let timestamp = truth.as_ref().map_or(0.0, |t| t.timestamp);
-        let mut rec = tracker.track(&frame_pre, index, timestamp);
-        rec.timing_us.insert("preprocess".into(), pre_us);
-        for (k, v) in &rec.timing_us {
-            stage_us.entry(k.clone()).or_default().push(*v);
-        }
-        for f in &rec.flags {
-            *flags.entry(f.clone()).or_default() += 1;
-        }
-        if let Some(e) = truth
-            .as_ref()
-            .and_then(|t| frame_error(&rec.keypoints, &t.keypoints))
-        {
-            errors.push(e);
-        }
-        if !rec.is_finite() {
-            bail!("frame {frames}: the tracker produced a non-finite record (a bug)");
-        }
-        if let Some(dir) = &args.overlay {
-            write_overlay(dir, index, tracker, &frame_pre)?;
-        }
-        match mcap.as_mut() {
-            Some(w) => w
-                .write(&frame, Some(&rec))
-                .with_context(|| format!("writing {}", args.out.display()))?,
-            None => {
-                lines.push_str(&serde_json::to_string(&rec)?);
-                lines.push('\n');
+    let mut errors = Vec::new();
+    let frames = for_each_frame(
+        &args.sequence,
+        &args.segmentation,
+        args.points,
+        args.frames,
+        "track",
+        |sf| {
+            let index = sf.truth.map_or(sf.position as u64, |t| t.frame);
+            let timestamp = sf.truth.map_or(0.0, |t| t.timestamp);
+            let mut rec = tracker.track(sf.pre, index, timestamp);
+            rec.timing_us.insert("preprocess".into(), sf.preprocess_us);
+            for (k, v) in &rec.timing_us {
+                stage_us.entry(k.clone()).or_default().push(*v);
             }
-        }
-        frames += 1;
-        bar.inc(1);
-    }
-    bar.finish_and_clear();
+            for f in &rec.flags {
+                *flags.entry(f.clone()).or_default() += 1;
+            }
+            if let Some(e) = sf
+                .truth
+                .and_then(|t| frame_error(&rec.keypoints, &t.keypoints))
+            {
+                errors.push(e);
+            }
+            if !rec.is_finite() {
+                bail!(
+                    "frame {}: the tracker produced a non-finite record (a bug)",
+                    sf.position
+                );
+            }
+            if let Some(dir) = &args.overlay {
+                write_overlay(dir, index, tracker, sf.pre)?;
+            }
+            match mcap.as_mut() {
+                Some(w) => w
+                    .write(sf.frame, Some(&rec))
+                    .with_context(|| format!("writing {}", args.out.display()))?,
+                None => {
+                    lines.push_str(&serde_json::to_string(&rec)?);
+                    lines.push('\n');
+                }
+            }
+            Ok(())
+        },
+    )?;
     match mcap.as_mut() {
         Some(w) => w.finish(),
         None => write_atomic(&args.out, lines.as_bytes()),

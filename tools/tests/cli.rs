@@ -538,3 +538,85 @@ fn bench_rejects_bad_arguments_clearly() {
         assert_fails_clearly(&args, needle);
     }
 }
+
+/// Issue 6 item 4: `hands calibrate` writes a template that `hands track --template` reads and
+/// that fits its subject better than the default hand; bad frame choices fail clearly.
+#[test]
+fn calibrate_writes_a_template_the_tracker_reads() {
+    let d = tmp("calibrate");
+    let s = |p: &PathBuf| p.to_str().expect("utf8").to_string();
+    let seq = d.join("cal.mcap");
+    let (ok, text) = hands(&[
+        "synth",
+        "--motion",
+        "calibration",
+        "--subject",
+        "random",
+        "--seed",
+        "3",
+        "--frames",
+        "60",
+        "--out",
+        &s(&seq),
+    ]);
+    assert!(ok, "{text}");
+    let me = d.join("me.json");
+    let report = d.join("report");
+    let (ok, text) = hands(&[
+        "calibrate",
+        &s(&seq),
+        "--auto",
+        "4",
+        "--out",
+        &s(&me),
+        "--report",
+        &s(&report),
+    ]);
+    assert!(ok, "{text}");
+    assert!(report.join("iterations.json").exists() && report.join("energy.svg").exists());
+    let error = |template: Option<&PathBuf>| {
+        let out = d.join("t.jsonl");
+        let mut args = vec![
+            "track".to_string(),
+            s(&seq),
+            "--model".into(),
+            "spheremesh".into(),
+        ];
+        if let Some(t) = template {
+            args.extend(["--template".into(), s(t)]);
+        }
+        args.extend(["--out".into(), s(&out)]);
+        let refs: Vec<&str> = args.iter().map(String::as_str).collect();
+        let (ok, text) = hands(&refs);
+        assert!(ok, "{text}");
+        let line = text
+            .lines()
+            .find(|l| l.contains("mean keypoint error"))
+            .expect("ground truth line");
+        let mm: f64 = line
+            .split("error ")
+            .nth(1)
+            .and_then(|r| r.split(' ').next())
+            .and_then(|v| v.parse().ok())
+            .expect("number");
+        mm
+    };
+    let (calibrated, default) = (error(Some(&me)), error(None));
+    assert!(
+        calibrated < default,
+        "calibrated {calibrated} mm vs default {default} mm"
+    );
+    let out = s(&d.join("x.json"));
+    assert_fails_clearly(
+        &["calibrate", &s(&seq), "--frames", "1", "--out", &out],
+        "at least 2",
+    );
+    assert_fails_clearly(
+        &["calibrate", &s(&seq), "--frames", "1,900", "--out", &out],
+        "beyond",
+    );
+    assert_fails_clearly(
+        &["calibrate", &s(&seq), "--out", &s(&d.join("x.txt"))],
+        ".json",
+    );
+}
