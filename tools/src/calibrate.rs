@@ -114,8 +114,8 @@ pub fn run(args: CalibrateArgs) -> Result<()> {
     let last = cal
         .iterations
         .iter()
-        .filter(|r| r.accepted)
-        .last()
+        .rev()
+        .find(|r| r.accepted)
         .map_or(cal.initial_energy, |r| r.energy);
     cal.template
         .save(&args.out)
