@@ -530,11 +530,18 @@ pub fn calibrate(
     config: &CalibrationConfig,
 ) -> Result<Calibration, CalibrationError> {
     let start = Instant::now();
-    if frames.is_empty() || frames.len() != poses.len() {
+    if frames.len() < 2 || frames.len() != poses.len() {
         return Err(CalibrationError::Input(format!(
-            "{} frames and {} initial poses (need the same, at least one)",
+            "{} frames and {} initial poses: calibration needs as many poses as frames and at least 2 frames in different poses (thesis §3.4: one view cannot separate shape from pose)",
             frames.len(),
             poses.len()
+        )));
+    }
+    if let Some(f) = frames.iter().position(|f| {
+        f.points.len() < 50 || f.points.iter().any(|p| !p.iter().all(|v| v.is_finite()))
+    }) {
+        return Err(CalibrationError::Input(format!(
+            "frame {f} has fewer than 50 points or a non-finite point"
         )));
     }
     let nd = base.skeleton.num_dofs();
