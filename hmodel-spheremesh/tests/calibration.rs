@@ -131,7 +131,10 @@ fn rejects_bad_input_clearly() {
             .map(|e| e.to_string())
             .unwrap_or_default()
     };
-    assert!(err(&[frame.clone()], &[pose.clone()]).contains("at least 2 frames"));
+    assert!(
+        err(std::slice::from_ref(&frame), std::slice::from_ref(&pose))
+            .contains("at least 2 frames")
+    );
     assert!(err(&[frame.clone(), frame.clone()], &[pose.clone()]).contains("as many poses"));
     let mut bad = frame.clone();
     bad.points[3].x = f64::NAN;
