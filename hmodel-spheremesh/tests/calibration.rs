@@ -5,7 +5,7 @@
 
 use hand_model::kinematics::Pose;
 use hand_model::spheremesh::{default_right_hand, PosedSphereMesh, ShapeBasis, SphereMeshTemplate};
-use hmodel_spheremesh::calibration::{calibrate, CalibrationConfig, CalibrationFrame};
+use hmodel_spheremesh::calibration::{calibrate, CalibrationConfig, CalibrationFrame, Schedule};
 use hmodel_spheremesh::synthetic::rendered_frame;
 use nalgebra::{Matrix3, Vector3};
 use rand::{Rng, SeedableRng};
@@ -92,6 +92,33 @@ fn recovers_a_perturbed_subject_from_eight_depth_frames() {
         ..CalibrationConfig::default()
     };
     let cal = calibrate(&base, &frames, &init, &config).unwrap();
+    let alternating = calibrate(
+        &base,
+        &frames,
+        &init,
+        &CalibrationConfig {
+            schedule: Schedule::Alternating,
+            ..config.clone()
+        },
+    )
+    .unwrap();
+    let final_energy = |c: &hmodel_spheremesh::calibration::Calibration| {
+        c.iterations
+            .iter()
+            .filter(|r| r.accepted)
+            .map(|r| r.energy)
+            .fold(c.initial_energy, f64::min)
+    };
+    println!(
+        "joint: energy {:.1} in {:.2} s, centers {:.2} mm; alternating: energy {:.1} in {:.2} s, centers {:.2} mm",
+        final_energy(&cal),
+        cal.seconds,
+        rest_errors(&cal.template, &truth).0,
+        final_energy(&alternating),
+        alternating.seconds,
+        rest_errors(&alternating.template, &truth).0
+    );
+    assert!(final_energy(&cal) <= final_energy(&alternating));
     let before = rest_errors(&base, &truth);
     let after = rest_errors(&cal.template, &truth);
     let accepted = cal.iterations.iter().filter(|r| r.accepted).count();

@@ -11,5 +11,5 @@ pub use select::select_frames;
 pub use shape::{ShapeSpace, ShapeState};
 pub use solve::{
     calibrate, Calibration, CalibrationConfig, CalibrationError, CalibrationFrame, FrameKind,
-    IterationRecord,
+    IterationRecord, Schedule,
 };

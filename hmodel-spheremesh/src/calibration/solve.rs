@@ -69,6 +69,18 @@ impl CalibrationFrame {
     }
 }
 
+/// How the unknowns are stepped.
+#[derive(Copy, Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Schedule {
+    /// One LM over all unknowns (poses and shape) at once.
+    Joint,
+    /// Alternate a shape step (poses held) and a pose step (shape held), the block-coordinate
+    /// counterpart of the thesis' alternating Eq. 3.9–3.10 (there step 1 frees per-frame centers
+    /// under the rigidity term; here every frame stays a kinematic posing of the template).
+    Alternating,
+}
+
 /// Weights and stopping rule of the calibration (thesis §3.6 "Reproducibility": τ_d2m = 1,
 /// τ_m2d = 0.5, τ_valid = 1e2).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -76,6 +88,8 @@ impl CalibrationFrame {
 pub struct CalibrationConfig {
     /// Most LM iterations (accepted or not).
     pub iterations: usize,
+    /// Joint or alternating steps.
+    pub schedule: Schedule,
     /// τ_d2m per point (squared distance, mm²).
     pub d2m: f64,
     /// τ_m2d per pushed pixel (squared pixels).
@@ -107,6 +121,7 @@ impl Default for CalibrationConfig {
     fn default() -> Self {
         Self {
             iterations: 30,
+            schedule: Schedule::Joint,
             d2m: 1.0,
             m2d: 0.5,
             valid: 1e2,
@@ -580,9 +595,15 @@ pub fn calibrate(
     let initial_energy = parts.total();
     let mut lambda = config.lambda;
     let mut records = Vec::new();
-    for _ in 0..config.iterations {
+    for it in 0..config.iterations {
         let t = Instant::now();
-        let Some(delta) = damped_solve(&ne, lambda) else {
+        let so = problem.shape_offset();
+        // Alternating: even iterations step the shape, odd ones the poses.
+        let fixed = |i: usize| match config.schedule {
+            Schedule::Joint => false,
+            Schedule::Alternating => (i >= so) == (it % 2 == 1),
+        };
+        let Some(delta) = damped_solve(&ne, lambda, &fixed) else {
             lambda *= 10.0;
             continue;
         };
@@ -639,12 +660,25 @@ pub fn calibrate(
     })
 }
 
-/// Solve `(A + λ diag(A) + ε I) δ = b`; `None` when the factorization fails.
-fn damped_solve(ne: &NormalEquations, lambda: f64) -> Option<DVector<f64>> {
+/// Solve `(A + λ diag(A) + ε I) δ = b` with the unknowns `fixed` selects held at 0; `None`
+/// when the factorization fails.
+fn damped_solve(
+    ne: &NormalEquations,
+    lambda: f64,
+    fixed: &dyn Fn(usize) -> bool,
+) -> Option<DVector<f64>> {
     let mut a: DMatrix<f64> = ne.lhs().clone();
+    let mut b = ne.rhs().clone();
     for i in 0..a.nrows() {
-        a[(i, i)] += lambda * a[(i, i)] + 1e-9;
+        if fixed(i) {
+            a.row_mut(i).fill(0.0);
+            a.column_mut(i).fill(0.0);
+            a[(i, i)] = 1.0;
+            b[i] = 0.0;
+        } else {
+            a[(i, i)] += lambda * a[(i, i)] + 1e-9;
+        }
     }
-    let delta = a.cholesky()?.solve(ne.rhs());
+    let delta = a.cholesky()?.solve(&b);
     delta.iter().all(|v| v.is_finite()).then_some(delta)
 }
