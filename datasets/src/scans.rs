@@ -626,6 +626,11 @@ pub struct ScaleEstimate {
 /// A pill joins two spheres of one bone or the centers of two consecutive bones, so its length
 /// does not change with the pose; the similarity over all centers would mix scale with the pose
 /// difference. `s = Σ dᵢ Dᵢ / Σ Dᵢ²` over pills (length `Dᵢ` in the reference, `dᵢ` posed).
+///
+/// On the authors' files the per-pose fits share their pill lengths to 0.01 mm, but the final
+/// model is not an exact scaled copy of them (fingertip pills 12 % shorter, thumb pills −17 % to
+/// +6 %): `relative_spread` is 0.09 there, and `s` = 0.02806 scan units per mm, whereas the
+/// similarity over the spheres that stay rigid with `palm_back` gives 0.02843.
 pub fn pill_length_scale(
     reference: &[Vector3<f64>],
     posed: &[Vector3<f64>],
@@ -847,6 +852,9 @@ pub struct FitLocation {
 /// units, so no alignment is needed: each fit, with the final radii scaled by its
 /// [`pill_length_scale`], is compared with every scan by the mean scan-to-model distance, and
 /// the scan it explains best is its own. Two fits claiming one scan is an error.
+///
+/// Measured on the authors' files: `fitting_result_k` belongs to `pose{k}` for k = 1..5 (mean
+/// distance 0.94–1.37 mm to its own scan, at least 20 mm to any other); `pose6` has no fit.
 pub fn locate_fits(
     reference: &FittedReference,
     scans: &[Vec<Vector3<f64>>],
