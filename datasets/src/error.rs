@@ -59,6 +59,10 @@ pub enum DatasetError {
     /// An error of the hand model (template, shape vector).
     #[error(transparent)]
     Model(#[from] ModelError),
+    /// A sphere-mesh that cannot be prepared for distance queries (e.g. a block naming a
+    /// missing sphere).
+    #[error(transparent)]
+    Geometry(#[from] hand_model::query::GeometryError),
 }
 
 impl DatasetError {

@@ -12,7 +12,9 @@
 //!   ground truth (pose, shape and the 21 keypoints of DESIGN.md);
 //! - [`sheet`]: contact sheets of depth frames with keypoints;
 //! - [`animbank`]: the RealSense recorded-pose corpus, retargeted to our digit DOFs;
-//! - [`prior`]: the pose corpus and the project's own PCA pose prior (thesis §2.3.2).
+//! - [`prior`]: the pose corpus and the project's own PCA pose prior (thesis §2.3.2);
+//! - [`scans`]: OBJ photogrammetry scans and the original authors' fitted sphere-meshes, the
+//!   real data of offline multi-frame calibration (issue 6, thesis §3.4).
 //!
 //! Still to come (issue 7): readers for the Handy/teaser layout, NYU and Dexter-1.
 
@@ -21,6 +23,7 @@ pub mod error;
 pub mod motion;
 pub mod noise;
 pub mod prior;
+pub mod scans;
 pub mod sheet;
 pub mod subjects;
 pub mod synth;
