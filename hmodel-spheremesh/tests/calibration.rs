@@ -256,3 +256,55 @@ fn calibrating_the_kinematic_frames_reduces_tracking_error() {
     );
     assert!(e_with < e_without, "{e_with} vs {e_without}");
 }
+
+/// Frames that do not constrain a parameter (issue 6 "Bad input"): with every finger straight
+/// in all frames, the calibration names the shape unknowns the data barely informs, and more of
+/// them than from frames with bent fingers.
+#[test]
+fn names_the_parameters_straight_fingers_leave_unconstrained() {
+    let base = default_right_hand();
+    let sk = &base.skeleton;
+    let cam = Camera::sr300_qvga();
+    let mut rng = ChaCha8Rng::seed_from_u64(4);
+    let mut run = |bent: bool| {
+        let poses: Vec<Pose> = (0..4)
+            .map(|_| {
+                let mut p = Pose::zeros(sk);
+                p.set(sk, "global_tz", 400.0).unwrap();
+                p.set(sk, "global_ry", rng.random_range(-0.5..0.5)).unwrap();
+                if bent {
+                    for d in sk.dofs() {
+                        if d.name.contains("flex") && !d.name.starts_with("global") {
+                            p.set(sk, &d.name, rng.random_range(0.2..1.1)).unwrap();
+                        }
+                    }
+                }
+                p.clamp_to_limits(sk);
+                p
+            })
+            .collect();
+        let frames: Vec<CalibrationFrame> = poses
+            .iter()
+            .map(|p| CalibrationFrame::depth(&rendered_frame(&base, p, &cam, 2500).unwrap()))
+            .collect();
+        let config = CalibrationConfig {
+            iterations: 5,
+            ..CalibrationConfig::default()
+        };
+        let cal = calibrate(&base, &frames, &poses, &config).unwrap();
+        cal.unconstrained(0.01)
+            .into_iter()
+            .map(String::from)
+            .collect::<Vec<_>>()
+    };
+    let straight = run(false);
+    let bent = run(true);
+    println!(
+        "unconstrained: {} with straight fingers ({:?}…), {} with bent fingers",
+        straight.len(),
+        &straight[..straight.len().min(6)],
+        bent.len()
+    );
+    assert!(!straight.is_empty());
+    assert!(straight.len() > bent.len());
+}

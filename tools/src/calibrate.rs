@@ -59,6 +59,10 @@ pub struct CalibrateArgs {
 /// necessary").
 const MIN_FRAMES: usize = 2;
 
+/// A shape parameter whose data information is below this fraction of the median of its kind
+/// is reported as unconstrained (`Calibration::unconstrained`).
+const UNCONSTRAINED: f64 = 0.01;
+
 /// Run `hands calibrate`.
 pub fn run(args: CalibrateArgs) -> Result<()> {
     if args.out.extension().and_then(|e| e.to_str()) != Some("json") {
@@ -127,9 +131,22 @@ pub fn run(args: CalibrateArgs) -> Result<()> {
         cal.seconds,
         args.out.display()
     );
+    let weak = cal.unconstrained(UNCONSTRAINED);
+    if !weak.is_empty() {
+        eprintln!(
+            "warning: the chosen frames barely constrain {} shape parameter(s); they stay near the starting template: {}",
+            weak.len(),
+            weak.join(", ")
+        );
+    }
     if let Some(dir) = &args.report {
         std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
-        let json = serde_json::to_string_pretty(&cal.iterations)?;
+        let json = serde_json::to_string_pretty(&serde_json::json!({
+            "frames": chosen,
+            "iterations": cal.iterations,
+            "information": cal.information,
+            "unconstrained": weak,
+        }))?;
         write_atomic(&dir.join("iterations.json"), json.as_bytes())?;
         let series =
             |name: &str, f: &dyn Fn(&hmodel_spheremesh::calibration::IterationRecord) -> f64| {

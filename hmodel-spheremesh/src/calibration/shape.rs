@@ -125,6 +125,21 @@ impl ShapeSpace {
             .filter_map(|(s, o)| o.map(|o| (s, o)))
     }
 
+    /// A name per unknown: `beta:<honline name>`, `rotation:<bone>.<x|y|z>`,
+    /// `sphere:<name>.<x|y|z|r>`.
+    pub fn names(&self, base: &SphereMeshTemplate) -> Vec<String> {
+        let mut out: Vec<String> = self.basis.names().map(|n| format!("beta:{n}")).collect();
+        for (k, _) in self.rotation_slots() {
+            let bone = &base.skeleton.bones()[k].name;
+            out.extend(["x", "y", "z"].map(|a| format!("rotation:{bone}.{a}")));
+        }
+        for (s, _) in self.sphere_offsets() {
+            let name = &base.spheres[s].name;
+            out.extend(["x", "y", "z", "r"].map(|a| format!("sphere:{name}.{a}")));
+        }
+        out
+    }
+
     /// The state of the unchanged template.
     pub fn identity(&self, base: &SphereMeshTemplate) -> ShapeState {
         ShapeState {

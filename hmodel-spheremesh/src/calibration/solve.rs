@@ -170,6 +170,35 @@ pub struct Calibration {
     pub iterations: Vec<IterationRecord>,
     /// Total wall time (s).
     pub seconds: f64,
+    /// Per shape unknown (named): how much the data (d2m + m2d) constrains it at the result —
+    /// the diagonal of the data terms' Gauss–Newton Hessian `Σ w j²` (per mm² for β and free
+    /// offsets, per rad² for rest rotations).
+    pub information: Vec<(String, f64)>,
+}
+
+impl Calibration {
+    /// The shape unknowns the data barely constrains: information below `fraction` of the
+    /// median over unknowns of the same kind (β, rotations, free offsets), e.g. the phalanx
+    /// lengths of fingers that stayed straight in every frame. Their values stay near the
+    /// starting template (held by the priors), so they are not calibrated.
+    pub fn unconstrained(&self, fraction: f64) -> Vec<&str> {
+        let kind = |n: &str| n.split(':').next().unwrap_or("").to_string();
+        let mut out = Vec::new();
+        for (name, info) in &self.information {
+            let mut same: Vec<f64> = self
+                .information
+                .iter()
+                .filter(|(m, _)| kind(m) == kind(name))
+                .map(|(_, v)| *v)
+                .collect();
+            same.sort_by(f64::total_cmp);
+            let median = same[same.len() / 2];
+            if *info < fraction * median {
+                out.push(name.as_str());
+            }
+        }
+        out
+    }
 }
 
 /// Why a calibration could not run.
@@ -206,6 +235,24 @@ impl Row {
         self.values[i] += v;
     }
 
+    /// Add `w j²` of the row's entries from `from` on to `info[i − from]` (the data term's
+    /// information about each shape unknown), then [`Row::flush`].
+    fn flush_data(
+        &mut self,
+        ne: &mut NormalEquations,
+        r: f64,
+        w: f64,
+        from: usize,
+        info: &mut [f64],
+    ) -> f64 {
+        for &i in &self.touched {
+            if let Some(x) = i.checked_sub(from).and_then(|k| info.get_mut(k)) {
+                *x += w * self.values[i] * self.values[i];
+            }
+        }
+        self.flush(ne, r, w)
+    }
+
     /// Add the row to `ne` and reset; returns the energy `w r²`.
     fn flush(&mut self, ne: &mut NormalEquations, r: f64, w: f64) -> f64 {
         self.pairs.clear();
@@ -218,13 +265,14 @@ impl Row {
     }
 }
 
-/// Energies of one linearization, by part.
-#[derive(Clone, Copy, Debug, Default)]
+/// Energies of one linearization, by part, and the data terms' information per shape unknown.
+#[derive(Clone, Debug, Default)]
 struct Parts {
     d2m: f64,
     m2d: f64,
     valid: f64,
     rest: f64,
+    info: Vec<f64>,
 }
 
 impl Parts {
@@ -268,7 +316,10 @@ impl Problem<'_> {
         let so = self.shape_offset();
         let mut ne = NormalEquations::new(n);
         let mut row = Row::new(n);
-        let mut parts = Parts::default();
+        let mut parts = Parts {
+            info: vec![0.0; self.space.len()],
+            ..Parts::default()
+        };
         let t = &state.template;
         let plain = IrlsParams {
             reweight: false,
@@ -324,7 +375,7 @@ impl Problem<'_> {
                         },
                     );
                 }
-                parts.d2m += row.flush(&mut ne, r, self.config.d2m);
+                parts.d2m += row.flush_data(&mut ne, r, self.config.d2m, so, &mut parts.info);
             }
             // m2d (Eq. 3.12): two pixel rows per push.
             if let Some(camera) = frame.sensor.camera.as_ref() {
@@ -359,7 +410,7 @@ impl Problem<'_> {
                                 &mut |i, dc, dr| row.add(so + i, g.dot(&dc) + gn * dr),
                             );
                         }
-                        parts.m2d += row.flush(&mut ne, res[axis], w);
+                        parts.m2d += row.flush_data(&mut ne, res[axis], w, so, &mut parts.info);
                     }
                 }
             }
@@ -651,12 +702,19 @@ pub fn calibrate(
             }
         }
     }
+    let information = problem
+        .space
+        .names(base)
+        .into_iter()
+        .zip(parts.info)
+        .collect();
     Ok(Calibration {
         template: state.template,
         poses: state.poses,
         initial_energy,
         iterations: records,
         seconds: start.elapsed().as_secs_f64(),
+        information,
     })
 }
 
