@@ -13,7 +13,7 @@
 use std::time::Instant;
 
 use hand_model::kinematics::Pose;
-use hand_model::query::{project_point_pill, View};
+use hand_model::query::{project_point_pill, Projection, SphereMeshGeometry, View};
 use hand_model::shape::Element;
 use hand_model::solver::{IrlsParams, NormalEquations};
 use hand_model::spheremesh::{PosedSphereMesh, SphereMeshTemplate};
@@ -90,6 +90,8 @@ pub struct CalibrationConfig {
     pub iterations: usize,
     /// Joint or alternating steps.
     pub schedule: Schedule,
+    /// Optimize the shape (false: poses only, e.g. to initialize a frame's pose).
+    pub fit_shape: bool,
     /// τ_d2m per point (squared distance, mm²).
     pub d2m: f64,
     /// τ_m2d per pushed pixel (squared pixels).
@@ -122,6 +124,7 @@ impl Default for CalibrationConfig {
         Self {
             iterations: 30,
             schedule: Schedule::Joint,
+            fit_shape: true,
             d2m: 1.0,
             m2d: 0.5,
             valid: 1e2,
@@ -414,6 +417,51 @@ impl Problem<'_> {
                     }
                 }
             }
+            // m2d on a complete cloud (Eq. 3.12 with Π_D the closest data point): samples of
+            // the posed model's visible surface pulled to their nearest cloud point, weighted so
+            // that the two distances keep the thesis' balance τ_m2d/τ_d2m per unit of
+            // |D|⁻¹ and |M|⁻¹ normalization.
+            if frame.kind == FrameKind::Cloud && !frame.points.is_empty() {
+                let samples = surface_samples(ctx.geometry());
+                let w = self.config.m2d * frame.points.len() as f64 / samples.len().max(1) as f64;
+                for q in &samples {
+                    let Some(p) = nearest_point(&frame.points, &q.point) else {
+                        continue;
+                    };
+                    let d = q.point - p;
+                    let len = d.norm();
+                    if len <= 1e-9 {
+                        continue;
+                    }
+                    let u = d / len;
+                    let dofs = self.jacobian.columns(
+                        &posed,
+                        q.element as usize,
+                        &q.spheres,
+                        &q.weights,
+                        &mut cols,
+                    );
+                    for (&dof, col) in dofs.iter().zip(&cols) {
+                        row.add(theta + dof, u.dot(col));
+                    }
+                    let un = u.dot(&q.normal);
+                    for (&sph, &wt) in q.spheres.iter().zip(&q.weights) {
+                        if wt == 0.0 {
+                            continue;
+                        }
+                        self.space.for_each_sphere_column(
+                            t,
+                            &posed,
+                            sph as usize,
+                            wt,
+                            &mut |i, dc, dr| {
+                                row.add(so + i, u.dot(&dc) + un * dr);
+                            },
+                        );
+                    }
+                    parts.m2d += row.flush_data(&mut ne, len, w, so, &mut parts.info);
+                }
+            }
             // Joint limits of θ_n.
             for (d, dof) in t.skeleton.dofs().iter().enumerate() {
                 let Some([lo, hi]) = dof.limits else { continue };
@@ -571,6 +619,92 @@ fn degenerate_target(
     }
 }
 
+/// Samples of a posed model's surface: on every element, points projected from a few
+/// directions around its skeleton (pills: 5 stations × 8 directions; wedges: 4 barycentric
+/// stations × both faces and 3 edge directions), keeping those on the union's surface (not
+/// buried in another element).
+fn surface_samples(g: &SphereMeshGeometry) -> Vec<Projection> {
+    let mut out = Vec::new();
+    let sp = g.spheres();
+    for (e, el) in g.elements().iter().enumerate() {
+        let ids = el.spheres();
+        let c: Vec<Vector3<f64>> = ids.iter().map(|&i| sp[i as usize].center).collect();
+        let rmax = ids
+            .iter()
+            .map(|&i| sp[i as usize].radius)
+            .fold(0.0, f64::max);
+        let mut probe = |s: Vector3<f64>, dir: Vector3<f64>| {
+            let Some(n) = dir.try_normalize(1e-12) else {
+                return;
+            };
+            let Some(q) = g.project_on_element(e, &(s + n * (rmax + 5.0))) else {
+                return;
+            };
+            if !g.is_buried(&q.point, 0.5) {
+                out.push(q);
+            }
+        };
+        match c.as_slice() {
+            [a, b] => {
+                let axis = b - a;
+                let u = any_perpendicular(&axis);
+                let v = axis.cross(&u).try_normalize(1e-12).unwrap_or(u);
+                for k in 0..5 {
+                    let s = a + axis * (f64::from(k) / 4.0);
+                    for j in 0..8 {
+                        let ang = f64::from(j) * std::f64::consts::FRAC_PI_4;
+                        probe(s, u * ang.cos() + v * ang.sin());
+                    }
+                }
+                probe(*a, -axis);
+                probe(*b, axis);
+            }
+            [a, b, d] => {
+                let n = (b - a).cross(&(d - a));
+                for w in [
+                    [1.0, 1.0, 1.0],
+                    [4.0, 1.0, 1.0],
+                    [1.0, 4.0, 1.0],
+                    [1.0, 1.0, 4.0],
+                ] {
+                    let sum: f64 = w.iter().sum();
+                    let s = (a * w[0] + b * w[1] + d * w[2]) / sum;
+                    probe(s, n);
+                    probe(s, -n);
+                }
+                let centroid = (a + b + d) / 3.0;
+                for (p, q) in [(a, b), (b, d), (d, a)] {
+                    let mid = (p + q) / 2.0;
+                    probe(mid, mid - centroid);
+                }
+            }
+            _ => {}
+        }
+    }
+    out
+}
+
+/// A unit vector perpendicular to `v` (any, when `v` is zero).
+fn any_perpendicular(v: &Vector3<f64>) -> Vector3<f64> {
+    let helper = if v.x.abs() < 0.9 * v.norm() {
+        Vector3::x()
+    } else {
+        Vector3::y()
+    };
+    v.cross(&helper)
+        .try_normalize(1e-12)
+        .unwrap_or_else(Vector3::z)
+}
+
+/// The point of `points` nearest to `q` (brute force: a scan has ~5000 points and a model a few
+/// hundred samples, a few ms per frame and iteration offline).
+fn nearest_point(points: &[Vector3<f64>], q: &Vector3<f64>) -> Option<Vector3<f64>> {
+    points
+        .iter()
+        .min_by(|a, b| (*a - q).norm_squared().total_cmp(&(*b - q).norm_squared()))
+        .copied()
+}
+
 /// The normal of the element surface at a push point (`q − s` of its interpolated sphere).
 fn posed_normal(posed: &PosedSphereMesh, push: &crate::SilhouettePush) -> Vector3<f64> {
     let (mut s, mut r) = (Vector3::zeros(), 0.0);
@@ -596,7 +730,8 @@ pub fn calibrate(
     config: &CalibrationConfig,
 ) -> Result<Calibration, CalibrationError> {
     let start = Instant::now();
-    if frames.len() < 2 || frames.len() != poses.len() {
+    let too_few = config.fit_shape && frames.len() < 2;
+    if frames.is_empty() || too_few || frames.len() != poses.len() {
         return Err(CalibrationError::Input(format!(
             "{} frames and {} initial poses: calibration needs as many poses as frames and at least 2 frames in different poses (thesis §3.4: one view cannot separate shape from pose)",
             frames.len(),
@@ -650,9 +785,12 @@ pub fn calibrate(
         let t = Instant::now();
         let so = problem.shape_offset();
         // Alternating: even iterations step the shape, odd ones the poses.
-        let fixed = |i: usize| match config.schedule {
-            Schedule::Joint => false,
-            Schedule::Alternating => (i >= so) == (it % 2 == 1),
+        let fixed = |i: usize| {
+            (!config.fit_shape && i >= so)
+                || match config.schedule {
+                    Schedule::Joint => false,
+                    Schedule::Alternating => (i >= so) == (it % 2 == 1),
+                }
         };
         let Some(delta) = damped_solve(&ne, lambda, &fixed) else {
             lambda *= 10.0;
