@@ -35,7 +35,8 @@ fn frame_of(points: &[Vector3<f64>]) -> (Vector3<f64>, Matrix3<f64>) {
 }
 
 /// Initial pose of one scan (mm): the template's rest principal frame turned onto the scan's
-/// (the 4 proper sign choices), flat or half-bent fingers; each solved for the pose alone, the
+/// (every axis assignment and sign giving a proper rotation), flat, half-bent or curled fingers;
+/// each solved for the pose alone, the
 /// one with the lowest energy kept.
 fn initial_pose(base: &SphereMeshTemplate, frame: &CalibrationFrame) -> (Pose, f64) {
     let sk = &base.skeleton;
@@ -45,7 +46,7 @@ fn initial_pose(base: &SphereMeshTemplate, frame: &CalibrationFrame) -> (Pose, f
     let (cs, as_) = frame_of(&frame.points);
     let config = CalibrationConfig {
         fit_shape: false,
-        iterations: 25,
+        iterations: 15,
         ..CalibrationConfig::default()
     };
     let mut best: Option<(Pose, f64)> = None;
