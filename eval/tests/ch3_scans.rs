@@ -113,12 +113,12 @@ fn calibrates_to_the_real_scans_like_the_authors() {
         println!("skipped: {} absent", root.display());
         return;
     }
-    let base = default_right_hand();
+    let right = default_right_hand();
     let scans: Vec<Vec<Vector3<f64>>> = (1..=6)
         .map(|k| read_obj_points(root.join(format!("scans/pose{k}.obj"))).unwrap())
         .collect();
     // One unit for all scans: the median of the per-scan extent estimates.
-    let rest = PosedSphereMesh::new(&base, &Pose::zeros(&base.skeleton));
+    let rest = PosedSphereMesh::new(&right, &Pose::zeros(&right.skeleton));
     let template_extents = sphere_principal_extents(&rest.spheres).unwrap();
     let mut units: Vec<f64> = scans
         .iter()
@@ -130,7 +130,24 @@ fn calibrates_to_the_real_scans_like_the_authors() {
         .iter()
         .map(|s| CalibrationFrame::cloud(s.iter().map(|p| p / units_per_mm).collect()))
         .collect();
-    let inits: Vec<(Pose, f64)> = frames.iter().map(|f| initial_pose(&base, f)).collect();
+    // Handedness by fit: the scanned hand is whichever of the default hand and its mirror
+    // image explains the scans better at the initialization.
+    let left = right.mirrored().unwrap();
+    let fit = |t: &SphereMeshTemplate| -> Vec<(Pose, f64)> {
+        frames.iter().map(|f| initial_pose(t, f)).collect()
+    };
+    let total = |v: &[(Pose, f64)]| v.iter().map(|(_, e)| e).sum::<f64>();
+    let (fit_right, fit_left) = (fit(&right), fit(&left));
+    println!(
+        "initialization energy: right hand {:.0}, left hand {:.0}",
+        total(&fit_right),
+        total(&fit_left)
+    );
+    let (base, inits) = if total(&fit_left) < total(&fit_right) {
+        (left, fit_left)
+    } else {
+        (right, fit_right)
+    };
     let poses: Vec<Pose> = inits.iter().map(|(p, _)| p.clone()).collect();
     let cal = calibrate(&base, &frames, &poses, &CalibrationConfig::default()).unwrap();
 
