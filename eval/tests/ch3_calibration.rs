@@ -21,13 +21,53 @@ use hmodel_spheremesh::{Tracker, TrackerConfig};
 use nalgebra::{Matrix3, Vector3};
 
 fn spec(motion: &str, seed: u64, frames: usize) -> SyntheticSpec {
+    noisy_spec(motion, seed, frames, "none")
+}
+
+fn noisy_spec(motion: &str, seed: u64, frames: usize, noise: &str) -> SyntheticSpec {
     SyntheticSpec {
         motion: motion.into(),
         subject: "random".into(),
         seed,
         frames,
+        noise: noise.into(),
         ..SyntheticSpec::default()
     }
+}
+
+/// Calibrate the default template to a subject's `calibration` sequence (8 frames chosen from
+/// a tracking run); returns the result and the subject's true template.
+fn calibrate_subject(
+    seed: u64,
+    noise: &str,
+    config: &CalibrationConfig,
+) -> (
+    hmodel_spheremesh::calibration::Calibration,
+    SphereMeshTemplate,
+    Vec<usize>,
+) {
+    let base = default_right_hand();
+    let sk = &base.skeleton;
+    let mut seq = SyntheticSequence::new(noisy_spec("calibration", seed, 300, noise)).unwrap();
+    let truth = seq.template().clone();
+    let (run, frames) = track_keep(&mut seq, &base);
+    let poses: Vec<Pose> = run
+        .records
+        .iter()
+        .map(|r| Pose {
+            values: sk
+                .dofs()
+                .iter()
+                .map(|d| r.pose.get(&d.name).copied().unwrap_or(0.0))
+                .collect(),
+        })
+        .collect();
+    let usable = |i: usize| run.records[i].flags.is_empty();
+    let chosen = select_frames(sk, &poses, usable, 8);
+    let cal_frames: Vec<CalibrationFrame> = chosen.iter().map(|&i| frames[i].clone()).collect();
+    let init: Vec<Pose> = chosen.iter().map(|&i| poses[i].clone()).collect();
+    let cal = calibrate(&base, &cal_frames, &init, config).unwrap();
+    (cal, truth, chosen)
 }
 
 /// Track `seq` with `template`; keep every frame's calibration data.
@@ -81,28 +121,9 @@ fn rest_errors(a: &SphereMeshTemplate, b: &SphereMeshTemplate) -> (f64, f64) {
 #[test]
 fn calibrates_random_subjects_from_eight_tracked_frames() {
     let base = default_right_hand();
-    let sk = &base.skeleton;
     let mut worst = (0.0f64, 0.0f64, 0.0f64);
     for seed in 1..=5u64 {
-        let mut seq = SyntheticSequence::new(spec("calibration", seed, 300)).unwrap();
-        let truth = seq.template().clone();
-        let (run, frames) = track_keep(&mut seq, &base);
-        let poses: Vec<Pose> = run
-            .records
-            .iter()
-            .map(|r| Pose {
-                values: sk
-                    .dofs()
-                    .iter()
-                    .map(|d| r.pose.get(&d.name).copied().unwrap_or(0.0))
-                    .collect(),
-            })
-            .collect();
-        let usable = |i: usize| run.records[i].flags.is_empty();
-        let chosen = select_frames(sk, &poses, usable, 8);
-        let cal_frames: Vec<CalibrationFrame> = chosen.iter().map(|&i| frames[i].clone()).collect();
-        let init: Vec<Pose> = chosen.iter().map(|&i| poses[i].clone()).collect();
-        let cal = calibrate(&base, &cal_frames, &init, &CalibrationConfig::default()).unwrap();
+        let (cal, truth, chosen) = calibrate_subject(seed, "none", &CalibrationConfig::default());
         let before = rest_errors(&base, &truth);
         let after = rest_errors(&cal.template, &truth);
         // Tracking the teaser with the calibrated and with the true template.
@@ -132,4 +153,29 @@ fn calibrates_random_subjects_from_eight_tracked_frames() {
         worst.0, worst.1, worst.2
     );
     assert!(worst.0 < 1.5 && worst.1 < 1.0, "{worst:?}");
+}
+
+/// The same with the ToF noise model (issue 6 "With ToF noise: report"): two subjects, the
+/// robust (Huber, 1 mm) d2m; the calibrated template must still be closer to the truth than
+/// the default. Measured: centers 5.55 → 4.81 and 2.63 → 2.08 mm — noise costs most of the
+/// noise-free gain (least squares on the same frames made subject 1 worse: 7.74 mm).
+#[test]
+fn calibration_with_tof_noise() {
+    let base = default_right_hand();
+    for seed in [1u64, 2] {
+        let config = CalibrationConfig {
+            robust: 1.0,
+            ..CalibrationConfig::default()
+        };
+        let (cal, truth, _) = calibrate_subject(seed, "tof", &config);
+        let (before, after) = (
+            rest_errors(&base, &truth),
+            rest_errors(&cal.template, &truth),
+        );
+        println!(
+            "tof subject {seed}: centers {:.2} → {:.2} mm, radii {:.2} → {:.2} mm ({:.2} s)",
+            before.0, after.0, before.1, after.1, cal.seconds
+        );
+        assert!(after.0 < before.0, "{before:?} → {after:?}");
+    }
 }

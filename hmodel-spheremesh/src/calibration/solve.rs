@@ -96,6 +96,8 @@ pub struct CalibrationConfig {
     pub d2m: f64,
     /// τ_m2d per pushed pixel (squared pixels).
     pub m2d: f64,
+    /// Huber threshold (mm) of the robust d2m (Eq. 3.11's ℓ1 beyond it); 0: least squares.
+    pub robust: f64,
     /// τ_valid (Eq. 3.14), per mm².
     pub valid: f64,
     /// Optimize the rest orientations of the kinematic frames `T̄` (Fig. 3.8; joint positions
@@ -127,6 +129,7 @@ impl Default for CalibrationConfig {
             fit_shape: true,
             d2m: 1.0,
             m2d: 0.5,
+            robust: 0.0,
             valid: 1e2,
             kinematic: true,
             free_spheres: false,
@@ -324,16 +327,20 @@ impl Problem<'_> {
             ..Parts::default()
         };
         let t = &state.template;
-        let plain = IrlsParams {
-            reweight: false,
-            ..IrlsParams::default()
+        // Eq. 3.11's robust ℓ1 as a Huber norm: quadratic below `robust` mm, ℓ1 beyond (IRLS
+        // weight min(1, robust/|r|)); 0 keeps plain least squares.
+        let irls = IrlsParams {
+            reweight: self.config.robust > 0.0,
+            reweight_rigid: true,
+            epsilon: self.config.robust.max(1e-9),
+            gain: self.config.robust.max(1e-9),
         };
         let mut cols = [Vector3::zeros(); MAX_ELEMENT_DOFS];
         for (f, (frame, pose)) in self.frames.iter().zip(&state.poses).enumerate() {
             let view = View::Perspective {
                 camera_center: Vector3::zeros(),
             };
-            let mut ctx = TrackingCtx::new(t, view, plain.clone())?;
+            let mut ctx = TrackingCtx::new(t, view, irls.clone())?;
             ctx.set_points(&frame.points);
             *ctx.sensor_mut() = frame.sensor.clone();
             ctx.set_front_facing(frame.kind == FrameKind::Depth);
@@ -346,11 +353,12 @@ impl Problem<'_> {
             let posed = ctx.posed_mesh().clone();
             let theta = f * self.nd;
             // d2m (Eq. 3.11): r = −‖p − q‖, row uᵀ∂q.
-            for ((c, u), &r) in ctx
+            for (((c, u), &r), &wr) in ctx
                 .correspondences()
                 .iter()
                 .zip(ctx.directions())
                 .zip(ctx.residuals())
+                .zip(ctx.weights())
             {
                 let Some(c) = c else { continue };
                 let dofs = self.jacobian.columns(
@@ -378,7 +386,16 @@ impl Problem<'_> {
                         },
                     );
                 }
-                parts.d2m += row.flush_data(&mut ne, r, self.config.d2m, so, &mut parts.info);
+                let w = self.config.d2m * wr;
+                row.flush_data(&mut ne, r, w, so, &mut parts.info);
+                // The energy the steps are judged by: the Huber norm itself (its IRLS
+                // quadratic has the same value and gradient at the linearization point).
+                parts.d2m += self.config.d2m
+                    * if ctx.reweighted() {
+                        irls.penalty(r)
+                    } else {
+                        r * r
+                    };
             }
             // m2d (Eq. 3.12): two pixel rows per push.
             if let Some(camera) = frame.sensor.camera.as_ref() {
