@@ -13,12 +13,11 @@
 use eval::synthetic::{SyntheticRun, SyntheticSequence, SyntheticSpec};
 use hand_model::kinematics::Pose;
 use hand_model::solver::PcaPrior;
-use hand_model::spheremesh::{default_right_hand, PosedSphereMesh, SphereMeshTemplate};
+use hand_model::spheremesh::{default_right_hand, SphereMeshTemplate};
 use hmodel_spheremesh::calibration::{
-    calibrate, select_frames, CalibrationConfig, CalibrationFrame,
+    calibrate, rest_sphere_errors, select_frames, CalibrationConfig, CalibrationFrame,
 };
 use hmodel_spheremesh::{Tracker, TrackerConfig};
-use nalgebra::{Matrix3, Vector3};
 
 fn spec(motion: &str, seed: u64, frames: usize) -> SyntheticSpec {
     noisy_spec(motion, seed, frames, "none")
@@ -90,42 +89,14 @@ fn track_keep(
     (run, frames)
 }
 
-/// Mean rest center distance after the best rigid alignment, and mean radius difference.
-fn rest_errors(a: &SphereMeshTemplate, b: &SphereMeshTemplate) -> (f64, f64) {
-    let pa = PosedSphereMesh::new(a, &Pose::zeros(&a.skeleton));
-    let pb = PosedSphereMesh::new(b, &Pose::zeros(&b.skeleton));
-    let n = pa.spheres.len() as f64;
-    let ca = pa.spheres.iter().map(|s| s.center).sum::<Vector3<f64>>() / n;
-    let cb = pb.spheres.iter().map(|s| s.center).sum::<Vector3<f64>>() / n;
-    let mut h = Matrix3::zeros();
-    for (x, y) in pa.spheres.iter().zip(&pb.spheres) {
-        h += (x.center - ca) * (y.center - cb).transpose();
-    }
-    let svd = h.svd(true, true);
-    let (u, vt) = (svd.u.unwrap(), svd.v_t.unwrap());
-    let mut d = Matrix3::identity();
-    if (vt.transpose() * u.transpose()).determinant() < 0.0 {
-        d[(2, 2)] = -1.0;
-    }
-    let r = vt.transpose() * d * u.transpose();
-    let pairs = pa.spheres.iter().zip(&pb.spheres);
-    let c = pairs
-        .clone()
-        .map(|(x, y)| (r * (x.center - ca) + cb - y.center).norm())
-        .sum::<f64>()
-        / n;
-    let rr = pairs.map(|(x, y)| (x.radius - y.radius).abs()).sum::<f64>() / n;
-    (c, rr)
-}
-
 #[test]
 fn calibrates_random_subjects_from_eight_tracked_frames() {
     let base = default_right_hand();
     let mut worst = (0.0f64, 0.0f64, 0.0f64);
     for seed in 1..=5u64 {
         let (cal, truth, chosen) = calibrate_subject(seed, "none", &CalibrationConfig::default());
-        let before = rest_errors(&base, &truth);
-        let after = rest_errors(&cal.template, &truth);
+        let before = rest_sphere_errors(&base, &truth).unwrap();
+        let after = rest_sphere_errors(&cal.template, &truth).unwrap();
         // Tracking the teaser with the calibrated and with the true template.
         let teaser = |t: &SphereMeshTemplate| {
             let mut s = SyntheticSequence::new(spec("teaser", seed, 300)).unwrap();
@@ -169,8 +140,8 @@ fn calibration_with_tof_noise() {
         };
         let (cal, truth, _) = calibrate_subject(seed, "tof", &config);
         let (before, after) = (
-            rest_errors(&base, &truth),
-            rest_errors(&cal.template, &truth),
+            rest_sphere_errors(&base, &truth).unwrap(),
+            rest_sphere_errors(&cal.template, &truth).unwrap(),
         );
         println!(
             "tof subject {seed}: centers {:.2} → {:.2} mm, radii {:.2} → {:.2} mm ({:.2} s)",

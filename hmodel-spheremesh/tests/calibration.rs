@@ -5,41 +5,14 @@
 
 use hand_model::kinematics::Pose;
 use hand_model::spheremesh::{default_right_hand, PosedSphereMesh, ShapeBasis, SphereMeshTemplate};
-use hmodel_spheremesh::calibration::{calibrate, CalibrationConfig, CalibrationFrame, Schedule};
+use hmodel_spheremesh::calibration::{
+    calibrate, rest_sphere_errors, CalibrationConfig, CalibrationFrame, Schedule,
+};
 use hmodel_spheremesh::synthetic::rendered_frame;
-use nalgebra::{Matrix3, Vector3};
+use nalgebra::Vector3;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use sensor_io::Camera;
-
-/// Mean center distance (after the best rigid alignment, Kabsch) and mean radius difference
-/// of two templates' rest spheres.
-fn rest_errors(a: &SphereMeshTemplate, b: &SphereMeshTemplate) -> (f64, f64) {
-    let pa = PosedSphereMesh::new(a, &Pose::zeros(&a.skeleton));
-    let pb = PosedSphereMesh::new(b, &Pose::zeros(&b.skeleton));
-    let n = pa.spheres.len() as f64;
-    let ca = pa.spheres.iter().map(|s| s.center).sum::<Vector3<f64>>() / n;
-    let cb = pb.spheres.iter().map(|s| s.center).sum::<Vector3<f64>>() / n;
-    let mut h = Matrix3::zeros();
-    for (x, y) in pa.spheres.iter().zip(&pb.spheres) {
-        h += (x.center - ca) * (y.center - cb).transpose();
-    }
-    let svd = h.svd(true, true);
-    let (u, vt) = (svd.u.unwrap(), svd.v_t.unwrap());
-    let mut d = Matrix3::identity();
-    if (vt.transpose() * u.transpose()).determinant() < 0.0 {
-        d[(2, 2)] = -1.0;
-    }
-    let r = vt.transpose() * d * u.transpose();
-    let pairs = pa.spheres.iter().zip(&pb.spheres);
-    let centers = pairs
-        .clone()
-        .map(|(x, y)| (r * (x.center - ca) + cb - y.center).norm())
-        .sum::<f64>()
-        / n;
-    let radii = pairs.map(|(x, y)| (x.radius - y.radius).abs()).sum::<f64>() / n;
-    (centers, radii)
-}
 
 #[test]
 fn recovers_a_perturbed_subject_from_eight_depth_frames() {
@@ -113,14 +86,14 @@ fn recovers_a_perturbed_subject_from_eight_depth_frames() {
         "joint: energy {:.1} in {:.2} s, centers {:.2} mm; alternating: energy {:.1} in {:.2} s, centers {:.2} mm",
         final_energy(&cal),
         cal.seconds,
-        rest_errors(&cal.template, &truth).0,
+        rest_sphere_errors(&cal.template, &truth).unwrap().0,
         final_energy(&alternating),
         alternating.seconds,
-        rest_errors(&alternating.template, &truth).0
+        rest_sphere_errors(&alternating.template, &truth).unwrap().0
     );
     assert!(final_energy(&cal) <= final_energy(&alternating));
-    let before = rest_errors(&base, &truth);
-    let after = rest_errors(&cal.template, &truth);
+    let before = rest_sphere_errors(&base, &truth).unwrap();
+    let after = rest_sphere_errors(&cal.template, &truth).unwrap();
     let accepted = cal.iterations.iter().filter(|r| r.accepted).count();
     println!(
         "calibration: {:.2} s, {} iterations ({accepted} accepted), energy {:.1} → {:.1}; centers {:.2} → {:.2} mm, radii {:.2} → {:.2} mm",

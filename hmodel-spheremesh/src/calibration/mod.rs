@@ -8,7 +8,7 @@ mod solve;
 
 pub use select::select_frames;
 
-pub use shape::{ShapeSpace, ShapeState};
+pub use shape::{rest_sphere_errors, ShapeSpace, ShapeState};
 pub use solve::{
     calibrate, Calibration, CalibrationConfig, CalibrationError, CalibrationFrame, FrameKind,
     IterationRecord, Schedule,

@@ -256,6 +256,37 @@ impl ShapeSpace {
     }
 }
 
+/// How far a calibrated template is from a reference of the same topology: the mean distance
+/// of their rest-pose sphere centers after the best rigid alignment (the rest frames are only
+/// defined up to the global gauge of the frames' poses; Umeyama/Kabsch,
+/// [`hand_model::math::fit_rigid`]) and the mean radius difference, both in mm. `None` when the
+/// sphere counts differ or the centers are degenerate.
+pub fn rest_sphere_errors(a: &SphereMeshTemplate, b: &SphereMeshTemplate) -> Option<(f64, f64)> {
+    let pa = PosedSphereMesh::new(a, &hand_model::kinematics::Pose::zeros(&a.skeleton));
+    let pb = PosedSphereMesh::new(b, &hand_model::kinematics::Pose::zeros(&b.skeleton));
+    if pa.spheres.len() != pb.spheres.len() {
+        return None;
+    }
+    let ca: Vec<Vector3<f64>> = pa.spheres.iter().map(|s| s.center).collect();
+    let cb: Vec<Vector3<f64>> = pb.spheres.iter().map(|s| s.center).collect();
+    let fit = hand_model::math::fit_rigid(&ca, &cb).ok()?;
+    let n = ca.len() as f64;
+    let centers = ca
+        .iter()
+        .zip(&cb)
+        .map(|(x, y)| (fit.transform_point(x) - y).norm())
+        .sum::<f64>()
+        / n;
+    let radii = pa
+        .spheres
+        .iter()
+        .zip(&pb.spheres)
+        .map(|(x, y)| (x.radius - y.radius).abs())
+        .sum::<f64>()
+        / n;
+    Some((centers, radii))
+}
+
 /// The frame of bone `k` before its own DOFs act (`G_parent ∘ T̄_k`).
 fn pre_dof_frame(skeleton: &Skeleton, posed: &PosedSphereMesh, k: usize) -> Rigid3 {
     let bone = &skeleton.bones()[k];

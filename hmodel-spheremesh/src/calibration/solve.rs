@@ -221,6 +221,8 @@ pub enum CalibrationError {
 /// A sparse row assembled in a dense scratch vector.
 struct Row {
     values: Vec<f64>,
+    /// Whether an index is in `touched` (a value may sum back to 0).
+    marked: Vec<bool>,
     touched: Vec<usize>,
     pairs: Vec<(usize, f64)>,
 }
@@ -229,13 +231,15 @@ impl Row {
     fn new(n: usize) -> Self {
         Self {
             values: vec![0.0; n],
+            marked: vec![false; n],
             touched: Vec::new(),
             pairs: Vec::new(),
         }
     }
 
     fn add(&mut self, i: usize, v: f64) {
-        if self.values[i] == 0.0 && !self.touched.contains(&i) {
+        if !self.marked[i] {
+            self.marked[i] = true;
             self.touched.push(i);
         }
         self.values[i] += v;
@@ -265,6 +269,7 @@ impl Row {
         for &i in &self.touched {
             self.pairs.push((i, self.values[i]));
             self.values[i] = 0.0;
+            self.marked[i] = false;
         }
         self.touched.clear();
         ne.add_row(&self.pairs, r, w).map_or(0.0, |s| s.energy)
@@ -494,8 +499,9 @@ impl Problem<'_> {
                 parts.rest += row.flush(&mut ne, r, self.config.limits);
             }
         }
-        parts.valid += self.validity(t, &mut ne, &mut row);
-        parts.rest += self.shape_priors(state, &mut ne, &mut row);
+        let rest = PosedSphereMesh::new(t, &Pose::zeros(&t.skeleton));
+        parts.valid += self.validity(t, &rest, &mut ne, &mut row);
+        parts.rest += self.shape_priors(state, &rest, &mut ne, &mut row);
         ne.symmetrize();
         Ok((ne, parts))
     }
@@ -505,9 +511,14 @@ impl Problem<'_> {
     /// fixed; 3 rows per degenerate sphere. Spheres already inside at the initial template
     /// (the template's own design, e.g. a membrane sphere sunk into a finger base) are exempt:
     /// the term guards against calibration collapsing elements, not against the template.
-    fn validity(&self, t: &SphereMeshTemplate, ne: &mut NormalEquations, row: &mut Row) -> f64 {
+    fn validity(
+        &self,
+        t: &SphereMeshTemplate,
+        rest: &PosedSphereMesh,
+        ne: &mut NormalEquations,
+        row: &mut Row,
+    ) -> f64 {
         let so = self.shape_offset();
-        let rest = PosedSphereMesh::new(t, &Pose::zeros(&t.skeleton));
         let mut energy = 0.0;
         for (e, el) in t.elements.iter().enumerate() {
             for (k, &i) in el.element.spheres().iter().enumerate() {
@@ -521,7 +532,7 @@ impl Problem<'_> {
                 for axis in 0..3 {
                     self.space.for_each_sphere_column(
                         t,
-                        &rest,
+                        rest,
                         i as usize,
                         1.0,
                         &mut |idx, dc, _| {
@@ -536,10 +547,15 @@ impl Problem<'_> {
     }
 
     /// Radius bounds and the priors toward the initial template (gauge).
-    fn shape_priors(&self, state: &State, ne: &mut NormalEquations, row: &mut Row) -> f64 {
+    fn shape_priors(
+        &self,
+        state: &State,
+        rest: &PosedSphereMesh,
+        ne: &mut NormalEquations,
+        row: &mut Row,
+    ) -> f64 {
         let so = self.shape_offset();
         let t = &state.template;
-        let rest = PosedSphereMesh::new(t, &Pose::zeros(&t.skeleton));
         let mut energy = 0.0;
         let [lo, hi] = self.config.radius_limits;
         for (s, sphere) in rest.spheres.iter().enumerate() {
@@ -552,7 +568,7 @@ impl Problem<'_> {
                 continue;
             };
             self.space
-                .for_each_sphere_column(t, &rest, s, 1.0, &mut |i, _, dr| row.add(so + i, dr));
+                .for_each_sphere_column(t, rest, s, 1.0, &mut |i, _, dr| row.add(so + i, dr));
             energy += row.flush(ne, res, self.config.limits);
         }
         let c = self.config;
