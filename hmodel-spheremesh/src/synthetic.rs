@@ -44,3 +44,89 @@ pub fn rendered_frame(
         ..PreprocessedFrame::default()
     })
 }
+
+/// A synthetic calibration problem (issue 6): a subject whose honline β is the default
+/// template's perturbed by up to ±`perturbation` (relative), `n` depth frames of it in random
+/// poses (even frames nearly straight, odd ones bent: the bends make the phalanx lengths
+/// observable), and initial poses 3 mm off the truth (as if tracked with a wrong template).
+pub struct CalibrationScene {
+    /// The subject's true template.
+    pub truth: SphereMeshTemplate,
+    /// The true pose of every frame.
+    pub poses: Vec<Pose>,
+    /// The frames, as the sensor sees them.
+    pub frames: Vec<crate::calibration::CalibrationFrame>,
+    /// The initial poses handed to the calibration.
+    pub initial: Vec<Pose>,
+}
+
+impl CalibrationScene {
+    /// Build the scene from `seed` with frames of at most `points` points seen by `camera`.
+    /// Errors come from the template (an invalid perturbed shape) or the camera.
+    pub fn new(
+        base: &SphereMeshTemplate,
+        seed: u64,
+        n: usize,
+        points: usize,
+        perturbation: f64,
+        camera: &Camera,
+    ) -> hand_model::Result<Self> {
+        use rand::{Rng, SeedableRng};
+        let basis = hand_model::spheremesh::ShapeBasis::honline(base)?;
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
+        let beta: Vec<f64> = basis
+            .template_values()
+            .iter()
+            .map(|v| v * (1.0 + rng.random_range(-perturbation..perturbation)))
+            .collect();
+        let truth = basis.apply(base, &beta)?;
+        let sk = &base.skeleton;
+        let poses: Vec<Pose> = (0..n)
+            .map(|k| {
+                let mut p = Pose::zeros(sk);
+                let mut set = |name: &str, v: f64| {
+                    if let Some(i) = sk.dof_index(name) {
+                        p.values[i] = v;
+                    }
+                };
+                set("global_tz", 400.0);
+                set("global_ty", 30.0);
+                set("global_rx", rng.random_range(-0.5..0.5));
+                set("global_ry", rng.random_range(-0.7..0.7));
+                for d in sk.dofs() {
+                    if d.name.contains("flex") && !d.name.starts_with("global") {
+                        let v = if k % 2 == 0 {
+                            rng.random_range(0.0..0.3)
+                        } else {
+                            rng.random_range(0.2..1.1)
+                        };
+                        set(&d.name, v);
+                    }
+                }
+                p.clamp_to_limits(sk);
+                p
+            })
+            .collect();
+        let frames = poses
+            .iter()
+            .map(|p| {
+                rendered_frame(&truth, p, camera, points)
+                    .map(|f| crate::calibration::CalibrationFrame::depth(&f))
+            })
+            .collect::<hand_model::Result<Vec<_>>>()?;
+        let initial = poses
+            .iter()
+            .map(|p| {
+                let mut q = p.clone();
+                q.values[0] += 3.0;
+                q
+            })
+            .collect();
+        Ok(Self {
+            truth,
+            poses,
+            frames,
+            initial,
+        })
+    }
+}

@@ -4,11 +4,11 @@
 //! pose after a rigid alignment of the rest frames (the global gauge of the frames' poses).
 
 use hand_model::kinematics::Pose;
-use hand_model::spheremesh::{default_right_hand, PosedSphereMesh, ShapeBasis, SphereMeshTemplate};
+use hand_model::spheremesh::{default_right_hand, PosedSphereMesh, SphereMeshTemplate};
 use hmodel_spheremesh::calibration::{
-    calibrate, rest_sphere_errors, CalibrationConfig, CalibrationFrame, Schedule,
+    calibrate, rest_sphere_errors, CalibrationConfig, CalibrationFrame, LinearSolver, Schedule,
 };
-use hmodel_spheremesh::synthetic::rendered_frame;
+use hmodel_spheremesh::synthetic::{rendered_frame, CalibrationScene};
 use nalgebra::Vector3;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -17,60 +17,29 @@ use sensor_io::Camera;
 #[test]
 fn recovers_a_perturbed_subject_from_eight_depth_frames() {
     let base = default_right_hand();
-    let basis = ShapeBasis::honline(&base).unwrap();
-    let mut rng = ChaCha8Rng::seed_from_u64(1);
-    let beta: Vec<f64> = basis
-        .template_values()
-        .iter()
-        .map(|v| v * (1.0 + rng.random_range(-0.15..0.15)))
-        .collect();
-    let truth = basis.apply(&base, &beta).unwrap();
-    let sk = &base.skeleton;
-    let poses: Vec<Pose> = (0..8)
-        .map(|k| {
-            let mut p = Pose::zeros(sk);
-            p.set(sk, "global_tz", 400.0).unwrap();
-            p.set(sk, "global_ty", 30.0).unwrap();
-            p.set(sk, "global_rx", rng.random_range(-0.5..0.5)).unwrap();
-            p.set(sk, "global_ry", rng.random_range(-0.7..0.7)).unwrap();
-            for d in sk.dofs() {
-                if d.name.contains("flex") && !d.name.starts_with("global") {
-                    let v = if k % 2 == 0 {
-                        rng.random_range(0.0..0.3)
-                    } else {
-                        rng.random_range(0.2..1.1)
-                    };
-                    p.set(sk, &d.name, v).unwrap();
-                }
-            }
-            p.clamp_to_limits(sk);
-            p
-        })
-        .collect();
-    let cam = Camera::sr300_qvga();
-    let frames: Vec<CalibrationFrame> = poses
-        .iter()
-        .map(|p| CalibrationFrame::depth(&rendered_frame(&truth, p, &cam, 2500).unwrap()))
-        .collect();
-    let init: Vec<Pose> = poses
-        .iter()
-        .map(|p| {
-            let mut q = p.clone();
-            q.values[0] += 3.0;
-            q
-        })
-        .collect();
+    let scene = CalibrationScene::new(&base, 1, 8, 2500, 0.15, &Camera::sr300_qvga()).unwrap();
+    let (truth, frames, init) = (&scene.truth, &scene.frames, &scene.initial);
     let config = CalibrationConfig {
         iterations: 80,
         ..CalibrationConfig::default()
     };
-    let cal = calibrate(&base, &frames, &init, &config).unwrap();
+    let cal = calibrate(&base, frames, init, &config).unwrap();
     let alternating = calibrate(
         &base,
-        &frames,
-        &init,
+        frames,
+        init,
         &CalibrationConfig {
             schedule: Schedule::Alternating,
+            ..config.clone()
+        },
+    )
+    .unwrap();
+    let dense = calibrate(
+        &base,
+        frames,
+        init,
+        &CalibrationConfig {
+            solver: LinearSolver::Dense,
             ..config.clone()
         },
     )
@@ -86,14 +55,26 @@ fn recovers_a_perturbed_subject_from_eight_depth_frames() {
         "joint: energy {:.1} in {:.2} s, centers {:.2} mm; alternating: energy {:.1} in {:.2} s, centers {:.2} mm",
         final_energy(&cal),
         cal.seconds,
-        rest_sphere_errors(&cal.template, &truth).unwrap().0,
+        rest_sphere_errors(&cal.template, truth).unwrap().0,
         final_energy(&alternating),
         alternating.seconds,
-        rest_sphere_errors(&alternating.template, &truth).unwrap().0
+        rest_sphere_errors(&alternating.template, truth).unwrap().0
     );
     assert!(final_energy(&cal) <= final_energy(&alternating));
-    let before = rest_sphere_errors(&base, &truth).unwrap();
-    let after = rest_sphere_errors(&cal.template, &truth).unwrap();
+    // The block-arrow (Schur) solve takes the dense Cholesky's steps.
+    println!(
+        "block-arrow solve {:.2} s, dense {:.2} s",
+        cal.seconds, dense.seconds
+    );
+    let relative = (final_energy(&cal) - final_energy(&dense)).abs() / final_energy(&dense);
+    assert!(
+        relative < 1e-6,
+        "block {} vs dense {}",
+        final_energy(&cal),
+        final_energy(&dense)
+    );
+    let before = rest_sphere_errors(&base, truth).unwrap();
+    let after = rest_sphere_errors(&cal.template, truth).unwrap();
     let accepted = cal.iterations.iter().filter(|r| r.accepted).count();
     println!(
         "calibration: {:.2} s, {} iterations ({accepted} accepted), energy {:.1} → {:.1}; centers {:.2} → {:.2} mm, radii {:.2} → {:.2} mm",

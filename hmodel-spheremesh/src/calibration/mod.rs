@@ -2,6 +2,7 @@
 //! unknowns and their Jacobians ([`ShapeSpace`]) and the joint LM over all frames
 //! ([`calibrate`]).
 
+mod block;
 mod select;
 mod shape;
 mod solve;
@@ -11,5 +12,5 @@ pub use select::select_frames;
 pub use shape::{rest_sphere_errors, ShapeSpace, ShapeState};
 pub use solve::{
     calibrate, Calibration, CalibrationConfig, CalibrationError, CalibrationFrame, FrameKind,
-    IterationRecord, Schedule,
+    IterationRecord, LinearSolver, Schedule,
 };

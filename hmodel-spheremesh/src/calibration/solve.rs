@@ -7,8 +7,8 @@
 //! frame). Rigidity (Eq. 3.13) holds by construction: every frame is the template posed by
 //! forward kinematics, so its segments keep their rest lengths exactly.
 //!
-//! The system is dense (`N·#θ + #shape` ≈ 500 unknowns for 8 frames) and solved by Cholesky;
-//! steps are accepted only when the energy decreases (true LM, λ adapted).
+//! Frames couple only through the shape: each step is solved by a Schur complement of the
+//! per-frame pose blocks (`block`, faer; [`LinearSolver::Dense`] is the dense reference); steps are accepted only when the energy decreases (true LM, λ adapted).
 
 use std::time::Instant;
 
@@ -81,6 +81,17 @@ pub enum Schedule {
     Alternating,
 }
 
+/// How the damped normal equations are solved.
+#[derive(Copy, Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum LinearSolver {
+    /// Schur complement of the per-frame pose blocks (faer Cholesky factorizations); cost
+    /// linear in the number of frames.
+    BlockArrow,
+    /// Dense Cholesky of the whole matrix (the reference; cubic in the number of frames).
+    Dense,
+}
+
 /// Weights and stopping rule of the calibration (thesis §3.6 "Reproducibility": τ_d2m = 1,
 /// τ_m2d = 0.5, τ_valid = 1e2).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -90,6 +101,8 @@ pub struct CalibrationConfig {
     pub iterations: usize,
     /// Joint or alternating steps.
     pub schedule: Schedule,
+    /// Block-arrow or dense solve of each step.
+    pub solver: LinearSolver,
     /// Optimize the shape (false: poses only, e.g. to initialize a frame's pose).
     pub fit_shape: bool,
     /// τ_d2m per point (squared distance, mm²).
@@ -126,6 +139,7 @@ impl Default for CalibrationConfig {
         Self {
             iterations: 30,
             schedule: Schedule::Joint,
+            solver: LinearSolver::BlockArrow,
             fit_shape: true,
             d2m: 1.0,
             m2d: 0.5,
@@ -813,6 +827,7 @@ pub fn calibrate(
     let (mut ne, mut parts) = problem.linearize(&state)?;
     let initial_energy = parts.total();
     let mut lambda = config.lambda;
+    let mut growth = 2.0;
     let mut records = Vec::new();
     for it in 0..config.iterations {
         let t = Instant::now();
@@ -825,10 +840,12 @@ pub fn calibrate(
                     Schedule::Alternating => (i >= so) == (it % 2 == 1),
                 }
         };
-        let Some(delta) = damped_solve(&ne, lambda, &fixed) else {
+        let Some(delta) = damped_solve(&ne, lambda, &fixed, config.solver, frames.len(), nd) else {
             lambda *= 10.0;
             continue;
         };
+        // The decrease the linearization predicts: E(0) − E(δ) = 2δᵀb − δᵀAδ.
+        let predicted = 2.0 * delta.dot(ne.rhs()) - delta.dot(&(ne.lhs() * &delta));
         // A step that breaks the geometry (a negative radius, a non-finite pose) is rejected
         // like one that raises the energy.
         let linearized = problem
@@ -844,7 +861,8 @@ pub fn calibrate(
                 accepted: false,
                 ms: t.elapsed().as_secs_f64() * 1e3,
             });
-            lambda *= 4.0;
+            lambda *= growth;
+            growth *= 2.0;
             continue;
         };
         let accepted = cparts.total().is_finite() && cparts.total() < parts.total();
@@ -859,15 +877,20 @@ pub fn calibrate(
             ms: t.elapsed().as_secs_f64() * 1e3,
         });
         if accepted {
+            // Nielsen's damping update from the gain ratio ρ (actual over predicted decrease):
+            // a step the quadratic model predicted well relaxes λ up to 3×, a poor one keeps it.
+            let rho = (parts.total() - cparts.total()) / predicted.max(1e-300);
+            lambda = (lambda * (1.0 / 3.0f64).max(1.0 - (2.0 * rho - 1.0).powi(3))).max(1e-9);
+            growth = 2.0;
             state = candidate;
             ne = cne;
             parts = cparts;
-            lambda = (lambda / 3.0).max(1e-9);
             if improvement < config.tolerance {
                 break;
             }
         } else {
-            lambda *= 4.0;
+            lambda *= growth;
+            growth *= 2.0;
             if lambda > 1e8 {
                 break;
             }
@@ -889,12 +912,15 @@ pub fn calibrate(
     })
 }
 
-/// Solve `(A + λ diag(A) + ε I) δ = b` with the unknowns `fixed` selects held at 0; `None`
-/// when the factorization fails.
+/// Solve `(A + λ diag(A) + ε I) δ = b` with the unknowns `fixed` selects held at 0, by
+/// `solver` over `frames` pose blocks of `nd` unknowns; `None` when the factorization fails.
 fn damped_solve(
     ne: &NormalEquations,
     lambda: f64,
     fixed: &dyn Fn(usize) -> bool,
+    solver: LinearSolver,
+    frames: usize,
+    nd: usize,
 ) -> Option<DVector<f64>> {
     let mut a: DMatrix<f64> = ne.lhs().clone();
     let mut b = ne.rhs().clone();
@@ -908,6 +934,9 @@ fn damped_solve(
             a[(i, i)] += lambda * a[(i, i)] + 1e-9;
         }
     }
-    let delta = a.cholesky()?.solve(&b);
+    let delta = match solver {
+        LinearSolver::BlockArrow => super::block::block_arrow_solve(&a, &b, frames, nd)?,
+        LinearSolver::Dense => a.cholesky()?.solve(&b),
+    };
     delta.iter().all(|v| v.is_finite()).then_some(delta)
 }
