@@ -80,7 +80,31 @@ impl CalibrationScene {
             .map(|v| v * (1.0 + rng.random_range(-perturbation..perturbation)))
             .collect();
         let truth = basis.apply(base, &beta)?;
-        let sk = &base.skeleton;
+        Self::with_rng(truth, &mut rng, n, points, camera)
+    }
+
+    /// The scene of a given subject `truth` (frames and poses drawn from `seed`).
+    pub fn from_truth(
+        truth: SphereMeshTemplate,
+        seed: u64,
+        n: usize,
+        points: usize,
+        camera: &Camera,
+    ) -> hand_model::Result<Self> {
+        use rand::SeedableRng;
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
+        Self::with_rng(truth, &mut rng, n, points, camera)
+    }
+
+    fn with_rng(
+        truth: SphereMeshTemplate,
+        rng: &mut rand_chacha::ChaCha8Rng,
+        n: usize,
+        points: usize,
+        camera: &Camera,
+    ) -> hand_model::Result<Self> {
+        use rand::Rng;
+        let sk = &truth.skeleton;
         let poses: Vec<Pose> = (0..n)
             .map(|k| {
                 let mut p = Pose::zeros(sk);

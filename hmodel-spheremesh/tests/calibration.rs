@@ -7,6 +7,7 @@ use hand_model::kinematics::Pose;
 use hand_model::spheremesh::{default_right_hand, PosedSphereMesh, SphereMeshTemplate};
 use hmodel_spheremesh::calibration::{
     calibrate, rest_sphere_errors, CalibrationConfig, CalibrationFrame, LinearSolver, Schedule,
+    Stage,
 };
 use hmodel_spheremesh::synthetic::{rendered_frame, CalibrationScene};
 use nalgebra::Vector3;
@@ -261,4 +262,44 @@ fn names_the_parameters_straight_fingers_leave_unconstrained() {
     );
     assert!(!straight.is_empty());
     assert!(straight.len() > bent.len());
+}
+
+/// Initialization (thesis §3.4): a hand much smaller than the template in every direction
+/// (height ×0.8, width ×0.85, thickness ×0.9) is first met by the anisotropic-scaling stage;
+/// without it the full LM starts from a template whose fingers overshoot the data.
+#[test]
+fn anisotropic_scaling_initializes_a_small_hand() {
+    let base = default_right_hand();
+    let basis = hand_model::spheremesh::ShapeBasis::honline(&base).unwrap();
+    let truth = basis
+        .apply(&base, &basis.from_latent([0.8, 0.85, 0.9]))
+        .unwrap();
+    let scene = CalibrationScene::from_truth(truth, 5, 8, 2500, &Camera::sr300_qvga()).unwrap();
+    let run = |scaling_iterations| {
+        let config = CalibrationConfig {
+            scaling_iterations,
+            ..CalibrationConfig::default()
+        };
+        let cal = calibrate(&base, &scene.frames, &scene.initial, &config).unwrap();
+        let errors = rest_sphere_errors(&cal.template, &scene.truth).unwrap();
+        (cal, errors)
+    };
+    let (with, e_with) = run(20);
+    let (without, e_without) = run(0);
+    let before = rest_sphere_errors(&base, &scene.truth).unwrap();
+    println!(
+        "small hand: centers {:.2} mm before, {:.2} mm with the scaling stage ({:.2} s), {:.2} mm without ({:.2} s); radii {:.2} / {:.2} mm",
+        before.0, e_with.0, with.seconds, e_without.0, without.seconds, e_with.1, e_without.1
+    );
+    let scaling = with
+        .iterations
+        .iter()
+        .filter(|r| r.stage == Stage::Scaling)
+        .count();
+    assert!(scaling > 0 && scaling <= 20);
+    assert!(
+        e_with.0 < 0.5 && e_with.1 < 0.5,
+        "{e_with:?} from {before:?}"
+    );
+    assert!(e_with.0 < 0.5 * e_without.0, "{e_with:?} vs {e_without:?}");
 }

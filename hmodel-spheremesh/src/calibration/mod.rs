@@ -12,5 +12,5 @@ pub use select::select_frames;
 pub use shape::{rest_sphere_errors, ShapeSpace, ShapeState};
 pub use solve::{
     calibrate, Calibration, CalibrationConfig, CalibrationError, CalibrationFrame, FrameKind,
-    IterationRecord, LinearSolver, Schedule,
+    IterationRecord, LinearSolver, Schedule, Stage,
 };

@@ -104,6 +104,23 @@ impl ShapeSpace {
         self.basis.len()
     }
 
+    /// The shape directions of an anisotropic scaling at `state` (thesis Eq. 4.14's latent
+    /// height, width and thickness β̃; `#shape × 3`): column k moves every β entry that scales
+    /// with axis k in proportion to its current value; rest rotations and free offsets stay.
+    pub fn latent_map(&self, state: &ShapeState) -> nalgebra::DMatrix<f64> {
+        let mut map = nalgebra::DMatrix::zeros(self.len, 3);
+        for k in 0..3 {
+            let mut axis = [0.0; 3];
+            axis[k] = 1.0;
+            for (i, v) in self.basis.from_latent(axis).iter().enumerate() {
+                if *v != 0.0 {
+                    map[(i, k)] = state.beta[i];
+                }
+            }
+        }
+        map
+    }
+
     /// Offsets of the rest-rotation unknowns.
     pub fn rotation_offsets(&self) -> impl Iterator<Item = usize> + '_ {
         self.bone.iter().flatten().copied()

@@ -97,8 +97,11 @@ pub enum LinearSolver {
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct CalibrationConfig {
-    /// Most LM iterations (accepted or not).
+    /// Most LM iterations (accepted or not) of the full stage.
     pub iterations: usize,
+    /// Most LM iterations of the anisotropic-scaling stage that initializes the shape (0:
+    /// none; thesis §3.4 "Initialization").
+    pub scaling_iterations: usize,
     /// Joint or alternating steps.
     pub schedule: Schedule,
     /// Block-arrow or dense solve of each step.
@@ -138,6 +141,7 @@ impl Default for CalibrationConfig {
     fn default() -> Self {
         Self {
             iterations: 30,
+            scaling_iterations: 20,
             schedule: Schedule::Joint,
             solver: LinearSolver::BlockArrow,
             fit_shape: true,
@@ -158,6 +162,28 @@ impl Default for CalibrationConfig {
     }
 }
 
+/// The stages of a calibration.
+#[derive(Copy, Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Stage {
+    /// The initialization: the template scaled anisotropically (height, width, thickness: the
+    /// latent β̃ of thesis Eq. 4.14), jointly with the poses.
+    Scaling,
+    /// Every shape unknown.
+    Full,
+}
+
+impl Stage {
+    /// The stage ends when an accepted step lowers the energy by less than this fraction. The
+    /// scaling stage only has to bring the template near the data: it hands over at 1 %.
+    fn tolerance(self, config: &CalibrationConfig) -> f64 {
+        match self {
+            Stage::Scaling => config.tolerance.max(1e-2),
+            Stage::Full => config.tolerance,
+        }
+    }
+}
+
 /// One LM iteration of the calibration.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct IterationRecord {
@@ -173,6 +199,8 @@ pub struct IterationRecord {
     pub lambda: f64,
     /// Whether the step was accepted.
     pub accepted: bool,
+    /// The stage it belongs to.
+    pub stage: Stage,
     /// Wall time (ms).
     pub ms: f64,
 }
@@ -819,83 +847,40 @@ pub fn calibrate(
         config,
         nd,
     };
-    let mut state = State {
+    let state = State {
         template: problem.space.template(base, &initial)?,
         shape: initial,
         poses: poses.to_vec(),
     };
-    let (mut ne, mut parts) = problem.linearize(&state)?;
-    let initial_energy = parts.total();
-    let mut lambda = config.lambda;
-    let mut growth = 2.0;
-    let mut records = Vec::new();
-    for it in 0..config.iterations {
-        let t = Instant::now();
-        let so = problem.shape_offset();
-        // Alternating: even iterations step the shape, odd ones the poses.
-        let fixed = |i: usize| {
-            (!config.fit_shape && i >= so)
-                || match config.schedule {
-                    Schedule::Joint => false,
-                    Schedule::Alternating => (i >= so) == (it % 2 == 1),
-                }
-        };
-        let Some(delta) = damped_solve(&ne, lambda, &fixed, config.solver, frames.len(), nd) else {
-            lambda *= 10.0;
-            continue;
-        };
-        // The decrease the linearization predicts: E(0) − E(δ) = 2δᵀb − δᵀAδ.
-        let predicted = 2.0 * delta.dot(ne.rhs()) - delta.dot(&(ne.lhs() * &delta));
-        // A step that breaks the geometry (a negative radius, a non-finite pose) is rejected
-        // like one that raises the energy.
-        let linearized = problem
-            .step(&state, &delta)
-            .map(|c| problem.linearize(&c).map(|l| (c, l)));
-        let Some(Ok((candidate, (cne, cparts)))) = linearized else {
-            records.push(IterationRecord {
-                energy: f64::INFINITY,
-                d2m: f64::INFINITY,
-                m2d: f64::INFINITY,
-                valid: f64::INFINITY,
-                lambda,
-                accepted: false,
-                ms: t.elapsed().as_secs_f64() * 1e3,
-            });
-            lambda *= growth;
-            growth *= 2.0;
-            continue;
-        };
-        let accepted = cparts.total().is_finite() && cparts.total() < parts.total();
-        let improvement = (parts.total() - cparts.total()) / parts.total().max(1e-300);
-        records.push(IterationRecord {
-            energy: cparts.total(),
-            d2m: cparts.d2m,
-            m2d: cparts.m2d,
-            valid: cparts.valid,
-            lambda,
-            accepted,
-            ms: t.elapsed().as_secs_f64() * 1e3,
-        });
-        if accepted {
-            // Nielsen's damping update from the gain ratio ρ (actual over predicted decrease):
-            // a step the quadratic model predicted well relaxes λ up to 3×, a poor one keeps it.
-            let rho = (parts.total() - cparts.total()) / predicted.max(1e-300);
-            lambda = (lambda * (1.0 / 3.0f64).max(1.0 - (2.0 * rho - 1.0).powi(3))).max(1e-9);
-            growth = 2.0;
-            state = candidate;
-            ne = cne;
-            parts = cparts;
-            if improvement < config.tolerance {
-                break;
-            }
-        } else {
-            lambda *= growth;
-            growth *= 2.0;
-            if lambda > 1e8 {
-                break;
-            }
-        }
+    let (ne, parts) = problem.linearize(&state)?;
+    let mut descent = Descent {
+        initial_energy: parts.total(),
+        state,
+        ne,
+        parts,
+        lambda: config.lambda,
+        growth: 2.0,
+        records: Vec::new(),
+    };
+    if config.fit_shape && config.scaling_iterations > 0 {
+        let map = problem.space.latent_map(&descent.state.shape);
+        descent.run(
+            &problem,
+            config.scaling_iterations,
+            Stage::Scaling,
+            Some(&map),
+        )?;
+        descent.lambda = config.lambda;
+        descent.growth = 2.0;
     }
+    descent.run(&problem, config.iterations, Stage::Full, None)?;
+    let Descent {
+        state,
+        parts,
+        initial_energy,
+        records,
+        ..
+    } = descent;
     let information = problem
         .space
         .names(base)
@@ -912,31 +897,186 @@ pub fn calibrate(
     })
 }
 
-/// Solve `(A + λ diag(A) + ε I) δ = b` with the unknowns `fixed` selects held at 0, by
-/// `solver` over `frames` pose blocks of `nd` unknowns; `None` when the factorization fails.
-fn damped_solve(
-    ne: &NormalEquations,
+/// The LM iterate and its bookkeeping, shared by the stages of [`calibrate`].
+struct Descent {
+    state: State,
+    ne: NormalEquations,
+    parts: Parts,
+    initial_energy: f64,
     lambda: f64,
-    fixed: &dyn Fn(usize) -> bool,
+    /// Nielsen's growth factor of λ after a rejected step.
+    growth: f64,
+    records: Vec<IterationRecord>,
+}
+
+impl Descent {
+    /// At most `iterations` LM steps; with `map` (`#shape × k`) the shape step is restricted to
+    /// `δ_shape = map · δ_k` (the anisotropic-scaling stage).
+    fn run(
+        &mut self,
+        problem: &Problem<'_>,
+        iterations: usize,
+        stage: Stage,
+        map: Option<&DMatrix<f64>>,
+    ) -> Result<(), CalibrationError> {
+        let config = problem.config;
+        let so = problem.shape_offset();
+        for it in 0..iterations {
+            let t = Instant::now();
+            // Alternating: even iterations step the shape, odd ones the poses.
+            let fixed = |i: usize| {
+                (!config.fit_shape && i >= so)
+                    || match config.schedule {
+                        Schedule::Joint => false,
+                        Schedule::Alternating => (i >= so) == (it % 2 == 1),
+                    }
+            };
+            let solve = Damped {
+                lambda: self.lambda,
+                fixed: &fixed,
+                solver: config.solver,
+                frames: problem.frames.len(),
+                nd: problem.nd,
+                map,
+            };
+            let Some(delta) = solve.solve(&self.ne) else {
+                self.lambda *= 10.0;
+                continue;
+            };
+            // The decrease the linearization predicts: E(0) − E(δ) = 2δᵀb − δᵀAδ.
+            let predicted = 2.0 * delta.dot(self.ne.rhs()) - delta.dot(&(self.ne.lhs() * &delta));
+            // A step that breaks the geometry (a negative radius, a non-finite pose) is
+            // rejected like one that raises the energy.
+            let linearized = problem
+                .step(&self.state, &delta)
+                .map(|c| problem.linearize(&c).map(|l| (c, l)));
+            let mut record = IterationRecord {
+                energy: f64::INFINITY,
+                d2m: f64::INFINITY,
+                m2d: f64::INFINITY,
+                valid: f64::INFINITY,
+                lambda: self.lambda,
+                accepted: false,
+                stage,
+                ms: 0.0,
+            };
+            let candidate = match linearized {
+                Some(Ok((c, (cne, cparts)))) => {
+                    record.energy = cparts.total();
+                    record.d2m = cparts.d2m;
+                    record.m2d = cparts.m2d;
+                    record.valid = cparts.valid;
+                    Some((c, cne, cparts))
+                }
+                _ => None,
+            };
+            let before = self.parts.total();
+            record.accepted = record.energy.is_finite() && record.energy < before;
+            record.ms = t.elapsed().as_secs_f64() * 1e3;
+            self.records.push(record);
+            match candidate {
+                Some((c, cne, cparts)) if cparts.total() < before => {
+                    // Nielsen's damping update from the gain ratio ρ (actual over predicted
+                    // decrease): a well-predicted step relaxes λ up to 3×, a poor one keeps it.
+                    let rho = (before - cparts.total()) / predicted.max(1e-300);
+                    let factor = (1.0 / 3.0f64).max(1.0 - (2.0 * rho - 1.0).powi(3));
+                    self.lambda = (self.lambda * factor).max(1e-9);
+                    self.growth = 2.0;
+                    let improvement = (before - cparts.total()) / before.max(1e-300);
+                    self.state = c;
+                    self.ne = cne;
+                    self.parts = cparts;
+                    if improvement < stage.tolerance(config) {
+                        break;
+                    }
+                }
+                _ => {
+                    self.lambda *= self.growth;
+                    self.growth *= 2.0;
+                    if self.lambda > 1e8 {
+                        break;
+                    }
+                }
+            }
+        }
+        Ok(())
+    }
+}
+
+/// One damped solve `(A + λ diag(A) + ε I) δ = b` (see [`Damped::solve`]).
+struct Damped<'a> {
+    lambda: f64,
+    /// Unknowns held at 0.
+    fixed: &'a dyn Fn(usize) -> bool,
     solver: LinearSolver,
     frames: usize,
     nd: usize,
-) -> Option<DVector<f64>> {
-    let mut a: DMatrix<f64> = ne.lhs().clone();
-    let mut b = ne.rhs().clone();
-    for i in 0..a.nrows() {
-        if fixed(i) {
-            a.row_mut(i).fill(0.0);
-            a.column_mut(i).fill(0.0);
-            a[(i, i)] = 1.0;
-            b[i] = 0.0;
-        } else {
-            a[(i, i)] += lambda * a[(i, i)] + 1e-9;
+    /// A restriction of the shape step, `δ_shape = map · δ_k`.
+    map: Option<&'a DMatrix<f64>>,
+}
+
+impl Damped<'_> {
+    /// The step of the normal equations `ne` with the unknowns `fixed` selects held at 0 and
+    /// the shape restricted by `map`, solved by `solver` over `frames` pose blocks of `nd`
+    /// unknowns; `None` when the factorization fails.
+    fn solve(&self, ne: &NormalEquations) -> Option<DVector<f64>> {
+        let mut a: DMatrix<f64> = ne.lhs().clone();
+        let mut b = ne.rhs().clone();
+        for i in 0..a.nrows() {
+            if (self.fixed)(i) {
+                a.row_mut(i).fill(0.0);
+                a.column_mut(i).fill(0.0);
+                a[(i, i)] = 1.0;
+                b[i] = 0.0;
+            }
         }
+        let so = self.frames * self.nd;
+        if let Some(map) = self.map {
+            (a, b) = restrict(&a, &b, so, map);
+        }
+        for i in 0..a.nrows() {
+            a[(i, i)] += self.lambda * a[(i, i)] + 1e-9;
+        }
+        let delta = match self.solver {
+            LinearSolver::BlockArrow => {
+                super::block::block_arrow_solve(&a, &b, self.frames, self.nd)?
+            }
+            LinearSolver::Dense => a.cholesky()?.solve(&b),
+        };
+        let delta = match self.map {
+            Some(map) => {
+                let mut full = DVector::zeros(so + map.nrows());
+                full.rows_mut(0, so).copy_from(&delta.rows(0, so));
+                full.rows_mut(so, map.nrows())
+                    .copy_from(&(map * delta.rows(so, map.ncols())));
+                full
+            }
+            None => delta,
+        };
+        delta.iter().all(|v| v.is_finite()).then_some(delta)
     }
-    let delta = match solver {
-        LinearSolver::BlockArrow => super::block::block_arrow_solve(&a, &b, frames, nd)?,
-        LinearSolver::Dense => a.cholesky()?.solve(&b),
-    };
-    delta.iter().all(|v| v.is_finite()).then_some(delta)
+}
+
+/// The normal equations in the unknowns `[θ; k]` with `δ_shape = map · δ_k`:
+/// `Tᵀ A T`, `Tᵀ b` for `T = diag(I, map)`, block by block (the pose blocks are unchanged).
+fn restrict(
+    a: &DMatrix<f64>,
+    b: &DVector<f64>,
+    so: usize,
+    map: &DMatrix<f64>,
+) -> (DMatrix<f64>, DVector<f64>) {
+    let (ns, k) = map.shape();
+    let mut ra = DMatrix::zeros(so + k, so + k);
+    ra.view_mut((0, 0), (so, so))
+        .copy_from(&a.view((0, 0), (so, so)));
+    let ps = a.view((0, so), (so, ns)) * map;
+    ra.view_mut((0, so), (so, k)).copy_from(&ps);
+    ra.view_mut((so, 0), (k, so)).copy_from(&ps.transpose());
+    let ss = map.transpose() * a.view((so, so), (ns, ns)) * map;
+    ra.view_mut((so, so), (k, k)).copy_from(&ss);
+    let mut rb = DVector::zeros(so + k);
+    rb.rows_mut(0, so).copy_from(&b.rows(0, so));
+    rb.rows_mut(so, k)
+        .copy_from(&(map.transpose() * b.rows(so, ns)));
+    (ra, rb)
 }
