@@ -97,7 +97,7 @@ pub fn compare_methods(
                 let model = t
                     .model(camera)
                     .with_context(|| format!("{}: rendering frame {}", run.name, sf.position))?;
-                run.push(&frame, rec, Some(model), &distances);
+                run.push(&frame, rec, Some(model), &distances)?;
             }
             Ok(())
         },

@@ -139,7 +139,7 @@ pub fn run(args: EvalArgs) -> Result<()> {
                 pre: sf.pre,
                 truth: sf.truth,
             };
-            run.push(&frame, rec.clone(), rendered.as_ref(), &[]);
+            run.push(&frame, rec.clone(), rendered.as_ref(), &[])?;
             Ok(())
         },
     )?;

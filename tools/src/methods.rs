@@ -18,7 +18,7 @@ use hand_model::shape::Element;
 use hand_model::solver::PcaPrior;
 use hand_model::spheremesh::{PosedSphereMesh, SphereMeshTemplate};
 use hmodel_spheremesh::M2dMode;
-use sensor_io::{Camera, DepthImage};
+use sensor_io::Camera;
 
 use crate::track::read_config;
 use crate::trackers::{CylinderTracker, FrameTracker, SphereMeshTracker};
@@ -129,19 +129,6 @@ pub struct RenderedModel {
     pub pixels: Vec<u32>,
     /// Per pixel the model's depth (mm, camera z).
     pub depth_mm: Vec<f64>,
-}
-
-impl RenderedModel {
-    /// The model depth as an image of the camera's size (`u16` mm, 0 where there is no model).
-    pub fn depth_image(&self, camera: &Camera) -> DepthImage {
-        let mut img = DepthImage::zeros(camera.width, camera.height);
-        for (&k, &z) in self.pixels.iter().zip(&self.depth_mm) {
-            if let Some(d) = img.data.get_mut(k as usize) {
-                *d = z.round().clamp(1.0, f64::from(u16::MAX)) as u16;
-            }
-        }
-        img
-    }
 }
 
 /// Renders a model at arbitrary poses.

@@ -10,8 +10,10 @@ use std::path::Path;
 
 use anyhow::{Context, Result};
 use datasets::sheet::{contact_sheet, draw_keypoints};
+use eval::depth_metrics::{DepthMetricsScratch, ModelDepth};
 use eval::markers::{frame_error, mean, median, FrameError, MarkerSummary};
 use eval::plot::bar_plot_svg;
+use eval::traces::energy_summary;
 use image::RgbImage;
 use sensor_io::io::write_atomic;
 use sensor_io::preprocess::PreprocessedFrame;
@@ -54,6 +56,7 @@ pub struct MethodRun {
     pub has_truth: bool,
     /// The worst frames, worst first (at most [`WORST_FRAMES`]).
     pub worst: Vec<WorstFrame>,
+    scratch: DepthMetricsScratch,
 }
 
 /// The sensor side of a frame as the metrics read it.
@@ -66,66 +69,28 @@ pub struct SensorFrame<'a> {
     pub truth: Option<&'a HandRecord>,
 }
 
-/// E_d2m (mm) and E_m2d (px) of one frame from the sensor frame and the rendered model only.
-///
-/// E_d2m: mean over the frame's sensor points of the distance to the nearest back-projected
-/// model pixel. E_m2d: mean over the model pixels outside the sensor silhouette of the 2D
-/// distance to it (0 when none is outside). NaN where undefined.
+/// E_d2m (mm, Eq. 3.15) and E_m2d (px, Eq. 3.16) of one frame from the sensor frame (its
+/// depth and hand silhouette) and the rendered model only, by [`eval::depth_metrics`]; NaN
+/// where a metric is undefined.
 pub fn depth_metrics(
     pre: &PreprocessedFrame,
     camera: &Camera,
     model: &RenderedModel,
-) -> (f64, f64) {
-    if model.pixels.is_empty() {
-        return (f64::NAN, f64::NAN);
-    }
-    let w = camera.width.max(1);
-    let cloud: Vec<[f64; 3]> = model
-        .pixels
-        .iter()
-        .zip(&model.depth_mm)
-        .map(|(&k, &z)| {
-            let p = camera.backproject(f64::from(k % w), f64::from(k / w), z);
-            [p.x, p.y, p.z]
-        })
-        .collect();
-    let d2m = if pre.points.is_empty() {
-        f64::NAN
-    } else {
-        let sum: f64 = pre
-            .points
-            .iter()
-            .map(|p| {
-                cloud
-                    .iter()
-                    .map(|c| (p.x - c[0]).powi(2) + (p.y - c[1]).powi(2) + (p.z - c[2]).powi(2))
-                    .fold(f64::INFINITY, f64::min)
-                    .sqrt()
-            })
-            .sum();
-        sum / pre.points.len() as f64
-    };
-    let m2d = if pre.hand.count == 0 {
-        f64::NAN
-    } else {
-        let outside: Vec<f64> = model
-            .pixels
-            .iter()
-            .filter(|&&k| pre.hand.mask.data.get(k as usize).is_some_and(|&m| m == 0))
-            .map(|&k| {
-                pre.dt
-                    .dist2
-                    .get(k as usize)
-                    .map_or(0.0, |&d| f64::from(d).sqrt())
-            })
-            .collect();
-        if outside.is_empty() {
-            0.0
-        } else {
-            mean(&outside)
+    scratch: &mut DepthMetricsScratch,
+) -> Result<(f64, f64)> {
+    let mut depth = vec![0.0f32; camera.width as usize * camera.height as usize];
+    for (&k, &z) in model.pixels.iter().zip(&model.depth_mm) {
+        if let Some(d) = depth.get_mut(k as usize) {
+            *d = z as f32;
         }
-    };
-    (d2m, m2d)
+    }
+    let model = ModelDepth::from_f32(camera.width, camera.height, depth)?;
+    let m =
+        eval::depth_metrics::depth_metrics(&pre.depth, &pre.hand.mask, &model, camera, scratch)?;
+    Ok((
+        m.d2m.map_or(f64::NAN, |d| d.mean),
+        m.m2d.map_or(f64::NAN, |d| d.mean),
+    ))
 }
 
 impl MethodRun {
@@ -139,6 +104,7 @@ impl MethodRun {
             errors: Vec::new(),
             has_truth: false,
             worst: Vec::new(),
+            scratch: DepthMetricsScratch::default(),
         }
     }
 
@@ -151,9 +117,10 @@ impl MethodRun {
         record: HandRecord,
         model: Option<&RenderedModel>,
         distances: &[Option<f64>],
-    ) {
+    ) -> Result<()> {
         let (d2m, m2d) = match (model, frame.pre.camera.as_ref()) {
-            (Some(m), Some(c)) => depth_metrics(frame.pre, c, m),
+            (Some(m), Some(c)) => depth_metrics(frame.pre, c, m, &mut self.scratch)
+                .with_context(|| format!("{}: metrics of frame {}", self.name, frame.position))?,
             _ => (f64::NAN, f64::NAN),
         };
         let error = frame
@@ -199,6 +166,7 @@ impl MethodRun {
         self.m2d.push(m2d);
         self.errors.push(error);
         self.records.push(record);
+        Ok(())
     }
 
     /// Per frame the maximum keypoint error (∞ where there is none).
@@ -230,16 +198,9 @@ impl MethodRun {
 
     /// Per energy term its mean over the frames that report it.
     pub fn mean_energies(&self) -> BTreeMap<String, f64> {
-        let mut sums: BTreeMap<String, (f64, usize)> = BTreeMap::new();
-        for r in &self.records {
-            for (k, &v) in &r.energies {
-                let e = sums.entry(k.clone()).or_default();
-                e.0 += v;
-                e.1 += 1;
-            }
-        }
-        sums.into_iter()
-            .map(|(k, (s, n))| (k, s / n.max(1) as f64))
+        energy_summary(&self.records)
+            .into_iter()
+            .map(|(k, s)| (k, s.mean))
             .collect()
     }
 
