@@ -108,7 +108,7 @@ pub fn run(args: EvalArgs) -> Result<()> {
         |sf| {
             let Some(rec) = records.get(sf.position) else {
                 bail!(
-                    "the track {} ends at frame {} but the sequence {} goes on",
+                    "the track {} has {} frames but the sequence {} has more: evaluate a track on the sequence it was computed from (all of its frames)",
                     args.track.display(),
                     records.len(),
                     args.sequence.display()
