@@ -82,6 +82,27 @@ impl TrackSettings {
     }
 }
 
+/// Apply the switches of `TrackSettings` to a tracker config with `front_facing`, `lm` and
+/// `enabled` fields (both trackers' configs): the shared terms plus the listed own ones.
+macro_rules! apply_switches {
+    ($cfg:ident, $s:ident, [$($term:ident),*]) => {{
+        $cfg.front_facing &= $s.front_facing;
+        if !$s.rigid_first {
+            $cfg.lm.rigid_iterations = 0;
+        }
+        let e = &mut $cfg.enabled;
+        $(e.$term &= !$s.off(stringify!($term));)*
+        for (on, term) in [
+            (&mut e.collision, "collision"),
+            (&mut e.pose_prior, "pose_prior"),
+            (&mut e.joint_limits, "joint_limits"),
+            (&mut e.temporal, "temporal"),
+        ] {
+            *on &= !$s.off(term);
+        }
+    }};
+}
+
 /// Every available method, in the order of tables and plots.
 pub const METHODS: &[&dyn Method] = &[&Cylinders, &SphereMesh];
 
@@ -258,18 +279,7 @@ impl MethodModel for CylinderMethodModel {
         s: &TrackSettings,
     ) -> Result<Box<dyn FrameTracker + 'a>> {
         let mut cfg: htrack_icp::TrackerConfig = read_config(s.config.as_deref())?;
-        cfg.front_facing &= s.front_facing;
-        if !s.rigid_first {
-            cfg.lm.rigid_iterations = 0;
-        }
-        let e = &mut cfg.enabled;
-        e.e3d &= !s.off("e3d");
-        e.e2d &= !s.off("e2d");
-        e.wrist &= !s.off("wrist");
-        e.collision &= !s.off("collision");
-        e.pose_prior &= !s.off("pose_prior");
-        e.joint_limits &= !s.off("joint_limits");
-        e.temporal &= !s.off("temporal");
+        apply_switches!(cfg, s, [e3d, e2d, wrist]);
         Ok(Box::new(CylinderTracker::new(&self.0, cfg, prior)?))
     }
 
@@ -326,20 +336,10 @@ impl MethodModel for SphereMeshMethodModel {
         s: &TrackSettings,
     ) -> Result<Box<dyn FrameTracker + 'a>> {
         let mut cfg: hmodel_spheremesh::TrackerConfig = read_config(s.config.as_deref())?;
-        cfg.front_facing &= s.front_facing;
-        if !s.rigid_first {
-            cfg.lm.rigid_iterations = 0;
-        }
         if let Some(m) = &s.m2d {
             cfg.m2d_mode = m2d_mode(m)?;
         }
-        let e = &mut cfg.enabled;
-        e.d2m &= !s.off("d2m");
-        e.m2d &= !s.off("m2d");
-        e.collision &= !s.off("collision");
-        e.pose_prior &= !s.off("pose_prior");
-        e.joint_limits &= !s.off("joint_limits");
-        e.temporal &= !s.off("temporal");
+        apply_switches!(cfg, s, [d2m, m2d]);
         Ok(Box::new(SphereMeshTracker::new(&self.0, cfg, prior)?))
     }
 

@@ -29,13 +29,14 @@ pub struct TrackArgs {
     /// Input sequence: a folder or an `.mcap` file (see `hands synth`, `hands convert`).
     pub sequence: PathBuf,
     /// Tracking model: `spheremesh` (the Ch. 3 sphere-mesh tracker on `--template`), or the
-    /// Ch. 2 cylinder tracker: `cylinders` (cylinders fitted to the default sphere-mesh hand,
+    /// Ch. 2 cylinder tracker: `cylinders` (cylinders fitted to `--template`, default the default hand,
     /// with a wrist segment), `cylinders-htrack` (htrack's proportions, no wrist), an htrack
     /// `.calib` file, a sphere-mesh template `.json` or `subject:<name>` (a `hands synth`
     /// subject) — the last two give the cylinders fitted to that sphere-mesh.
     #[arg(long, default_value = "cylinders")]
     pub model: String,
-    /// Sphere-mesh template of `--model spheremesh`: a template `.json` or `subject:<name>`
+    /// The subject's sphere-mesh template when `--model` is a method name (`spheremesh`,
+    /// `cylinders`: the cylinders are fitted to it): a template `.json` or `subject:<name>`
     /// (default: the default hand).
     #[arg(long)]
     pub template: Option<String>,
