@@ -1,13 +1,23 @@
 //! # eval — metrics, reports and comparisons
 //!
+//! - [`depth_metrics`]: the algorithm-agnostic E_d2m (thesis Eq. 3.15 / 4.17, kd-tree to the
+//!   rendered model's point cloud) and E_m2d (Eq. 3.16, distance transform of the sensor
+//!   silhouette), from a sensor depth, its silhouette and a rendered model depth only;
 //! - [`markers`]: per-frame average and maximum marker errors, fraction of frames under ε
 //!   (DESIGN.md "Metrics");
+//! - [`shape_error`]: E_β (Eq. 4.16), the mean absolute shape-parameter error over a subset;
+//! - [`traces`]: per-term energy traces and timing summaries of tracker records;
 //! - [`plot`]: SVG line plots for reports;
 //! - [`synthetic`]: scoring any tracker on a synthetic sequence with exact ground truth.
 //!
-//! Still to come (issue 7): E_d2m and E_m2d from sensor depth and a rendered model, E_β, the
-//! dataset formats and `hands eval|compare`.
+//! Still to come (issue 7): `hands eval|compare|demo`.
 
+pub mod depth_metrics;
+pub mod error;
 pub mod markers;
 pub mod plot;
+pub mod shape_error;
 pub mod synthetic;
+pub mod traces;
+
+pub use error::{EvalError, Result};

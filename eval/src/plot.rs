@@ -1,4 +1,4 @@
-//! SVG line plots for reports (plotters' SVG backend: no system fonts needed, text is left to
+//! SVG line plots and grouped bar charts for reports (plotters' SVG backend: no system fonts needed, text is left to
 //! the viewer).
 
 use plotters::prelude::*;
@@ -94,6 +94,80 @@ pub fn line_plot_svg(
     Ok(svg)
 }
 
+/// A grouped bar chart as an SVG document: one group of bars per category (x axis), one bar per
+/// named series in each group (the papers' per-term ablation bars). Non-finite values draw no
+/// bar; the y range starts at 0.
+pub fn bar_plot_svg(
+    title: &str,
+    y_label: &str,
+    categories: &[String],
+    series: &[(String, Vec<f64>)],
+) -> anyhow::Result<String> {
+    let y1 = series
+        .iter()
+        .flat_map(|(_, v)| v)
+        .copied()
+        .filter(|y| y.is_finite())
+        .fold(0.0f64, f64::max);
+    let y1 = if y1 > 0.0 { y1 * 1.1 } else { 1.0 };
+    let n = categories.len().max(1);
+    let mut svg = String::new();
+    {
+        let root = SVGBackend::with_string(&mut svg, (720, 400)).into_drawing_area();
+        root.fill(&WHITE).map_err(plot_err)?;
+        let mut chart = ChartBuilder::on(&root)
+            .caption(title, ("sans-serif", 18))
+            .margin(12)
+            .x_label_area_size(36)
+            .y_label_area_size(60)
+            .build_cartesian_2d(0.0..n as f64, 0.0..y1)
+            .map_err(plot_err)?;
+        let names = categories.to_vec();
+        chart
+            .configure_mesh()
+            .disable_x_mesh()
+            .x_labels(n * 2 + 1)
+            .x_label_formatter(&|x| {
+                let i = x.floor();
+                if (x - i - 0.5).abs() < 1e-6 && i >= 0.0 {
+                    names.get(i as usize).cloned().unwrap_or_default()
+                } else {
+                    String::new()
+                }
+            })
+            .y_desc(y_label)
+            .draw()
+            .map_err(plot_err)?;
+        let width = 0.8 / series.len().max(1) as f64;
+        for (j, (label, values)) in series.iter().enumerate() {
+            let color = PALETTE[j % PALETTE.len()];
+            let bars = values
+                .iter()
+                .enumerate()
+                .filter(|(_, y)| y.is_finite())
+                .map(move |(i, &y)| {
+                    let x0 = i as f64 + 0.1 + j as f64 * width;
+                    Rectangle::new([(x0, 0.0), (x0 + width, y.min(y1))], color.filled())
+                });
+            chart
+                .draw_series(bars)
+                .map_err(plot_err)?
+                .label(label.clone())
+                .legend(move |(x, y)| {
+                    Rectangle::new([(x, y - 5), (x + 15, y + 5)], color.filled())
+                });
+        }
+        chart
+            .configure_series_labels()
+            .background_style(WHITE.mix(0.8))
+            .border_style(BLACK)
+            .draw()
+            .map_err(plot_err)?;
+        root.present().map_err(plot_err)?;
+    }
+    Ok(svg)
+}
+
 fn plot_err<E: std::fmt::Display>(e: E) -> anyhow::Error {
     anyhow::anyhow!("plot: {e}")
 }
@@ -119,5 +193,19 @@ mod tests {
         assert!(svg.contains("closest point") && !svg.contains("NaN"));
         let empty = line_plot_svg("empty", "x", "y", &[], None).unwrap();
         assert!(empty.contains("</svg>"));
+    }
+
+    #[test]
+    fn bar_plot_groups_series_by_category() {
+        let terms = vec!["d2m".to_string(), "m2d".to_string()];
+        let s = vec![
+            ("cylinders".to_string(), vec![3.0, f64::NAN]),
+            ("spheremesh".to_string(), vec![2.0, 1.0]),
+        ];
+        let svg = bar_plot_svg("energies", "energy", &terms, &s).unwrap();
+        assert!(svg.contains("spheremesh") && svg.contains("d2m") && !svg.contains("NaN"));
+        assert!(bar_plot_svg("none", "y", &[], &[])
+            .unwrap()
+            .contains("</svg>"));
     }
 }

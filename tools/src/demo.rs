@@ -1,7 +1,8 @@
-//! `hands demo`: the main job on the embedded default — what the project can do so far, end to
-//! end, with no input files: the default template (summary, mesh, preview), a synthetic
-//! sequence with ground truth, the preprocessing of every frame and the Ch. 2 and Ch. 3
-//! trackers, each scored against that truth. Calibration joins as its issues land.
+//! `hands demo`: the main job — what the project can do, end to end, with no input files: the
+//! default template (summary, preview), a short teaser-like synthetic sequence of a random
+//! subject with time-of-flight noise and exact ground truth, the preprocessing of every frame,
+//! then every available method (the `methods` registry) tracking it, each scored against the
+//! truth, with a summary table and a report (`scoring`: metrics JSON, plots, worst frames).
 
 use std::path::PathBuf;
 use std::time::Instant;
@@ -11,9 +12,11 @@ use clap::Args;
 use datasets::noise::SensorModel;
 use datasets::sheet::{contact_sheet, depth_to_rgb, draw_keypoints};
 use datasets::synth::{Part, SceneConfig, Synthesizer};
-use datasets::MotionLibrary;
+use datasets::{subject_by_name, MotionLibrary};
+use eval::markers::median;
 use hand_model::kinematics::Pose;
 use hand_model::render::preview::{write_preview_png, PreviewOptions};
+use hand_model::solver::PcaPrior;
 use hand_model::spheremesh::default_right_hand;
 use sensor_io::io::{create_sequence, write_atomic};
 use sensor_io::preprocess::{
@@ -21,34 +24,43 @@ use sensor_io::preprocess::{
 };
 use sensor_io::Camera;
 
-use eval::markers::{frame_error, MarkerSummary};
-use hand_model::cylinder::CylinderModel;
-use hand_model::solver::PcaPrior;
-use htrack_icp::{Tracker, TrackerConfig};
+use crate::compare::{compare_methods, FrameOptions};
+use crate::scoring::write_report;
 
-/// Run the demo: synthesize → preprocess → score, writing everything under `--out`.
+/// Run the demo: synthesize → preprocess → track with every method → score, writing
+/// everything under `--out`.
 ///
-/// Example: `hands demo --out out/demo`
+/// Example: `hands demo --out demo-report --frames 120 --seed 7`
 #[derive(Args)]
 pub struct DemoArgs {
     /// Output folder.
-    #[arg(long, default_value = "out/demo")]
+    #[arg(long, default_value = "demo-report")]
     pub out: PathBuf,
-    /// Number of frames of the teaser motion.
+    /// Number of frames of the teaser motion (60 Hz).
     #[arg(long, default_value_t = 120)]
     pub frames: usize,
-    /// Seed.
-    #[arg(long, default_value_t = 7)]
-    pub seed: u64,
-}
-
-fn median(v: &mut [f64]) -> f64 {
-    v.sort_by(f64::total_cmp);
-    v.get(v.len() / 2).copied().unwrap_or(f64::NAN)
+    /// Seed of the subject, motion and noise (default: drawn from the clock, and printed).
+    #[arg(long)]
+    pub seed: Option<u64>,
+    /// Comma-separated methods to run, or `all`.
+    #[arg(long, default_value = "all")]
+    pub methods: String,
 }
 
 /// Run `hands demo`.
 pub fn run(args: DemoArgs) -> Result<()> {
+    anyhow::ensure!(
+        (1..=100_000).contains(&args.frames),
+        "--frames must be in 1..=100000, got {}",
+        args.frames
+    );
+    let methods = crate::methods::parse_list(&args.methods).context("--methods")?;
+    let seed = args.seed.unwrap_or_else(|| {
+        std::time::SystemTime::now()
+            .duration_since(std::time::UNIX_EPOCH)
+            .map_or(7, |d| d.as_secs() % 100_000)
+    });
+    let started = Instant::now();
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("creating {}", args.out.display()))?;
     let template = default_right_hand();
@@ -69,15 +81,16 @@ pub fn run(args: DemoArgs) -> Result<()> {
     println!("   preview: {}", preview.display());
 
     let camera = Camera::sr300_qvga();
-    let motion = MotionLibrary::by_name_for("teaser", args.seed, &template.skeleton)?;
+    let subject = subject_by_name("random", seed)?;
+    let motion = MotionLibrary::by_name_for("teaser", seed, &template.skeleton)?;
     let sensor = SensorModel::by_name("tof").context("tof model")?;
     let mut synth = Synthesizer::new(
         &template,
-        &[],
+        &subject.beta,
         SceneConfig {
             camera: camera.clone(),
             sensor,
-            seed: args.seed,
+            seed,
             ..Default::default()
         },
     )?;
@@ -88,23 +101,14 @@ pub fn run(args: DemoArgs) -> Result<()> {
         ..Default::default()
     });
     let mut out = PreprocessedFrame::default();
-    let cylinders = CylinderModel::from_sphere_mesh_with_wrist(synth.template())?;
-    let prior = PcaPrior::project_default();
-    let mut tracker = Tracker::new(&cylinders, TrackerConfig::default(), Some(&prior))?;
-    let subject = synth.template().clone();
-    let mut sphere_mesh = hmodel_spheremesh::Tracker::new(
-        &subject,
-        hmodel_spheremesh::TrackerConfig::default(),
-        Some(&prior),
-    )?;
-    let (mut sm_ms, mut sm_errors, mut sm_lines) = (Vec::new(), Vec::new(), String::new());
-    let mut track_lines = String::new();
-    let (mut track_ms, mut errors) = (Vec::new(), Vec::new());
     let (mut render_ms, mut pre_ms, mut ious) = (Vec::new(), Vec::new(), Vec::new());
     let mut tiles = Vec::new();
-    let bar = crate::progress::frames_bar(Some(args.frames), "demo");
+    let bar = crate::progress::frames_bar(Some(args.frames), "synthesize");
     let mut pose = Pose::zeros(&template.skeleton);
     for k in 0..args.frames {
+        if crate::interrupt::requested() {
+            break;
+        }
         let t = k as f64 / 60.0;
         motion.pose_into(t, &mut pose);
         let t0 = Instant::now();
@@ -114,22 +118,6 @@ pub fn run(args: DemoArgs) -> Result<()> {
         let t1 = Instant::now();
         pre.process(&f.frame, &camera, &mut out)?;
         pre_ms.push(t1.elapsed().as_secs_f64() * 1e3);
-        let t2 = Instant::now();
-        let rec = tracker.track(&out, k as u64, t);
-        track_ms.push(t2.elapsed().as_secs_f64() * 1e3);
-        if let Some(e) = frame_error(&rec.keypoints, &f.truth.keypoints) {
-            errors.push(e);
-        }
-        track_lines.push_str(&serde_json::to_string(&rec)?);
-        track_lines.push('\n');
-        let t3 = Instant::now();
-        let rec = sphere_mesh.track(&out, k as u64, t);
-        sm_ms.push(t3.elapsed().as_secs_f64() * 1e3);
-        if let Some(e) = frame_error(&rec.keypoints, &f.truth.keypoints) {
-            sm_errors.push(e);
-        }
-        sm_lines.push_str(&serde_json::to_string(&rec)?);
-        sm_lines.push('\n');
         let truth = f.parts.iter().map(|&p| p == Part::Hand);
         let (mut inter, mut union) = (0usize, 0usize);
         for (&m, h) in out.hand.mask.data.iter().zip(truth) {
@@ -155,43 +143,72 @@ pub fn run(args: DemoArgs) -> Result<()> {
     contact_sheet(&tiles, 4).write_to(&mut bytes, image::ImageFormat::Png)?;
     write_atomic(&sheet, bytes.get_ref())?;
     println!(
-        "2. synthesized {} frames of `teaser` with time-of-flight noise: {}",
-        args.frames,
+        "2. synthesized {} frames of `teaser` for the random subject `{}` (hand length {:.0} mm; seed {seed}) with time-of-flight noise: {}",
+        ious.len(),
+        subject.name,
+        subject.hand_length()?,
         seq_path.display()
     );
     println!("   contact sheet: {}", sheet.display());
     println!(
         "   render median {:.2} ms/frame (320×240, one core)",
-        median(&mut render_ms)
+        median(&render_ms)
     );
-    let mut sorted = ious.clone();
-    let worst = sorted.iter().copied().fold(f64::INFINITY, f64::min);
+    let worst = ious.iter().copied().fold(f64::INFINITY, f64::min);
     println!(
         "3. wristband segmentation vs ground truth: silhouette IoU median {:.3}, worst {:.3}; preprocessing median {:.2} ms/frame",
-        median(&mut sorted),
+        median(&ious),
         worst,
-        median(&mut pre_ms)
+        median(&pre_ms)
     );
-    let track_path = args.out.join("track.jsonl");
-    write_atomic(&track_path, track_lines.as_bytes())?;
-    let summary = MarkerSummary::new(&errors);
     println!(
-        "4. Ch. 2 tracker (cylinders fitted to the subject, 1 rigid + 7 LM iterations): mean keypoint error {:.2} mm, {:.1}% of frames with max error < 25 mm; median {:.2} ms/frame; {}",
-        summary.mean,
-        100.0 * summary.frac_max_under_25,
-        median(&mut track_ms),
-        track_path.display()
+        "4. every method on the subject's true template (calibration joins with issue 8), scored against the ground truth:"
     );
-    let sm_path = args.out.join("track-spheremesh.jsonl");
-    write_atomic(&sm_path, sm_lines.as_bytes())?;
-    let sm = MarkerSummary::new(&sm_errors);
+    for m in &methods {
+        println!("   - {}: {}", m.name(), m.summary());
+    }
+    let prior = PcaPrior::project_default();
+    let runs = compare_methods(
+        &seq_path,
+        &methods,
+        synth.template(),
+        Some(&prior),
+        &FrameOptions {
+            segmentation: "auto",
+            points: 2500,
+            frames: None,
+            label: "track",
+        },
+    )?;
+    for r in &runs {
+        let path = args.out.join(format!("track-{}.jsonl", r.name));
+        let mut lines = String::new();
+        for rec in &r.records {
+            lines.push_str(&serde_json::to_string(rec)?);
+            lines.push('\n');
+        }
+        write_atomic(&path, lines.as_bytes())
+            .with_context(|| format!("writing {}", path.display()))?;
+    }
+    let mut notes = vec![format!(
+        "`hands demo --seed {seed} --frames {}`: random subject `{}`, teaser motion, ToF noise; every method tracks with the subject's true template",
+        args.frames, subject.name
+    )];
+    if crate::interrupt::requested() {
+        notes.push("interrupted: the report covers the frames done so far".into());
+    }
+    let table = write_report(
+        &args.out,
+        "hands demo",
+        &seq_path.display().to_string(),
+        &runs,
+        &notes,
+    )?;
+    println!("\n{table}");
     println!(
-        "5. Ch. 3 sphere-mesh tracker (the subject's template, 1 rigid + 7 LM iterations): mean keypoint error {:.2} mm, {:.1}% of frames with max error < 25 mm; median {:.2} ms/frame; {}",
-        sm.mean,
-        100.0 * sm.frac_max_under_25,
-        median(&mut sm_ms),
-        sm_path.display()
+        "5. report: {} (metrics.json, plots, worst-frames.png, track-<method>.jsonl) in {:.1} s",
+        args.out.join("README.md").display(),
+        started.elapsed().as_secs_f64()
     );
-    println!("6. online calibration and the evaluation reports: not built yet (issues 6–8; `hands calibrate` exists).");
     Ok(())
 }

@@ -2,14 +2,18 @@
 
 mod bench;
 mod calibrate;
+mod compare;
 mod convert;
 mod demo;
+mod evaluate;
 mod interrupt;
+mod methods;
 mod model;
 mod overlay;
 mod prior;
 mod progress;
 mod report;
+mod scoring;
 mod synth;
 mod track;
 mod trackers;
@@ -31,8 +35,9 @@ struct Cli {
 
 #[derive(Subcommand)]
 enum Command {
-    /// The main job on the embedded default: synthesize, preprocess and score (no input files).
-    #[command(after_help = "Example: hands demo --out out/demo --frames 120")]
+    /// The main job (no input files): synthesize a random subject, track it with every method,
+    /// score against the ground truth and write a report.
+    #[command(after_help = "Example: hands demo --out demo-report --frames 120 --seed 7")]
     Demo(demo::DemoArgs),
     /// Inspect and export hand templates.
     #[command(subcommand, after_help = "Example: hands model show default")]
@@ -52,6 +57,16 @@ enum Command {
         after_help = "Example: hands track seq.mcap --model spheremesh --out track.jsonl --overlay overlay/"
     )]
     Track(track::TrackArgs),
+    /// Score a track file on its sequence: E_d2m/E_m2d, marker errors, plots.
+    #[command(
+        after_help = "Example: hands eval track.jsonl --sequence seq.mcap --model spheremesh --out eval/"
+    )]
+    Eval(evaluate::EvalArgs),
+    /// Run several methods on one sequence and write one side-by-side report.
+    #[command(
+        after_help = "Example: hands compare seq.mcap --methods cylinders,spheremesh --out report/"
+    )]
+    Compare(compare::CompareArgs),
     /// Calibrate the sphere-mesh template to a sequence of the user's hand (thesis §3.4).
     #[command(
         after_help = "Example: hands calibrate seq.mcap --auto 8 --out me.json --report calib/"
@@ -80,6 +95,8 @@ fn main() -> anyhow::Result<()> {
         Command::Convert(args) => convert::run(args),
         Command::Synth(args) => synth::run(args),
         Command::Track(args) => track::run(args),
+        Command::Eval(args) => evaluate::run(args),
+        Command::Compare(args) => compare::run(args),
         Command::Calibrate(args) => calibrate::run(args),
         Command::Report(args) => report::run(args),
         Command::Prior(cmd) => prior::run(cmd),

@@ -11,7 +11,6 @@ use eval::markers::{frame_error, median};
 use hand_model::cylinder::{default_right_hand_cylinders, CylinderModel};
 use hand_model::solver::PcaPrior;
 use hand_model::spheremesh::SphereMeshTemplate;
-use hmodel_spheremesh::M2dMode;
 use sensor_io::io::{open_sequence, write_atomic, McapWriter, SequenceWriter, TRACK_TOPIC};
 use sensor_io::preprocess::{
     DepthOnlyParams, PreprocessConfig, PreprocessedFrame, Preprocessor, Segmentation,
@@ -19,7 +18,8 @@ use sensor_io::preprocess::{
 };
 use serde::de::DeserializeOwned;
 
-use crate::trackers::{CylinderTracker, FrameTracker, SphereMeshTracker};
+use crate::methods::{CylinderMethodModel, Cylinders, Method, MethodModel, TrackSettings};
+use crate::trackers::FrameTracker;
 
 /// Track a sequence (folder or `.mcap`) frame by frame.
 ///
@@ -29,13 +29,14 @@ pub struct TrackArgs {
     /// Input sequence: a folder or an `.mcap` file (see `hands synth`, `hands convert`).
     pub sequence: PathBuf,
     /// Tracking model: `spheremesh` (the Ch. 3 sphere-mesh tracker on `--template`), or the
-    /// Ch. 2 cylinder tracker: `cylinders` (cylinders fitted to the default sphere-mesh hand,
+    /// Ch. 2 cylinder tracker: `cylinders` (cylinders fitted to `--template`, default the default hand,
     /// with a wrist segment), `cylinders-htrack` (htrack's proportions, no wrist), an htrack
     /// `.calib` file, a sphere-mesh template `.json` or `subject:<name>` (a `hands synth`
     /// subject) — the last two give the cylinders fitted to that sphere-mesh.
     #[arg(long, default_value = "cylinders")]
     pub model: String,
-    /// Sphere-mesh template of `--model spheremesh`: a template `.json` or `subject:<name>`
+    /// The subject's sphere-mesh template when `--model` is a method name (`spheremesh`,
+    /// `cylinders`: the cylinders are fitted to it): a template `.json` or `subject:<name>`
     /// (default: the default hand).
     #[arg(long)]
     pub template: Option<String>,
@@ -105,36 +106,49 @@ pub struct TrackArgs {
     pub no_temporal: bool,
 }
 
-/// The model name that selects the Ch. 3 tracker.
-const SPHEREMESH: &str = "spheremesh";
+/// The `--no-<term>` switches and the energy term each disables.
+fn disabled_terms(args: &TrackArgs) -> Vec<(&'static str, &'static str)> {
+    [
+        ("--no-e3d", "e3d", args.no_e3d),
+        ("--no-e2d", "e2d", args.no_e2d),
+        ("--no-wrist", "wrist", args.no_wrist),
+        ("--no-d2m", "d2m", args.no_d2m),
+        ("--no-m2d", "m2d", args.no_m2d),
+        ("--m2d", "m2d", args.m2d.is_some()),
+        ("--no-collision", "collision", args.no_collision),
+        ("--no-pose-prior", "pose_prior", args.no_pose_prior),
+        ("--no-joint-limits", "joint_limits", args.no_joint_limits),
+        ("--no-temporal", "temporal", args.no_temporal),
+    ]
+    .into_iter()
+    .filter(|(_, _, set)| *set)
+    .map(|(flag, term, _)| (flag, term))
+    .collect()
+}
 
-/// Reject the switches that the chosen tracker does not have, naming the model, rather than
-/// silently ignoring an ablation the user asked for.
-fn check_flags(args: &TrackArgs) -> Result<()> {
-    let spheremesh = args.model == SPHEREMESH;
-    let only_spheremesh = [
-        ("--template", args.template.is_some()),
-        ("--no-d2m", args.no_d2m),
-        ("--no-m2d", args.no_m2d),
-        ("--m2d", args.m2d.is_some()),
-    ];
-    let only_cylinders = [
-        ("--no-e3d", args.no_e3d),
-        ("--no-e2d", args.no_e2d),
-        ("--no-wrist", args.no_wrist),
-    ];
-    let (wrong, hint): (&[(&str, bool)], &str) = if spheremesh {
-        (&only_cylinders, "a cylinder model (`--model cylinders`)")
-    } else {
-        (&only_spheremesh, "`--model spheremesh`")
-    };
-    if let Some((flag, _)) = wrong.iter().find(|(_, set)| *set) {
-        bail!(
-            "{flag} does not apply to --model {}: it needs {hint}",
-            args.model
-        );
+/// The method of `--model` and its settings from the switches. A switch for a term the method
+/// does not have is an error naming the model, rather than a silently ignored ablation.
+fn settings(args: &TrackArgs, method: &dyn Method) -> Result<TrackSettings> {
+    let mut disabled = Vec::new();
+    for (flag, term) in disabled_terms(args) {
+        if !method.terms().contains(&term) {
+            bail!(
+                "{flag} does not apply to --model {}: its terms are {}",
+                args.model,
+                method.terms().join(", ")
+            );
+        }
+        if flag != "--m2d" {
+            disabled.push(term);
+        }
     }
-    Ok(())
+    Ok(TrackSettings {
+        config: args.config.clone(),
+        front_facing: !args.no_front_facing,
+        rigid_first: !args.no_rigid_first,
+        disabled,
+        m2d: args.m2d.clone(),
+    })
 }
 
 /// A sphere-mesh template: a template `.json` or `subject:<name>` (the `hands synth` subject of
@@ -153,21 +167,37 @@ pub(crate) fn load_sphere_mesh(spec: &str) -> Result<SphereMeshTemplate> {
     bail!("unknown sphere-mesh template `{spec}`: use a template .json or subject:<name>")
 }
 
-/// Load the cylinder model named by `--model`.
-fn load_model(name: &str) -> Result<CylinderModel> {
-    match name {
-        "cylinders" => Ok(CylinderModel::from_sphere_mesh_with_wrist(
-            &hand_model::spheremesh::default_right_hand(),
-        )?),
-        "cylinders-htrack" => Ok(default_right_hand_cylinders()),
-        p if p.ends_with(".calib") => Ok(hand_model::cylinder::load_htrack_calib(Path::new(p))?),
-        p if p.ends_with(".json") || p.starts_with("subject:") => Ok(
-            CylinderModel::from_sphere_mesh_with_wrist(&load_sphere_mesh(p)?)?,
-        ),
-        other => bail!(
-            "unknown --model `{other}`: use `spheremesh`, `cylinders`, `cylinders-htrack`, an htrack .calib file, a sphere-mesh .json or subject:<name>"
-        ),
+/// The method and model named by `--model` (with `--template`): a method name (the method's
+/// model of the template, default the default hand), else a cylinder model of the Ch. 2 method.
+fn load_model(
+    name: &str,
+    template: Option<&str>,
+) -> Result<(&'static dyn Method, Box<dyn MethodModel>)> {
+    if let Ok(method) = crate::methods::by_name(name) {
+        let template = match template {
+            Some(spec) => load_sphere_mesh(spec)?,
+            None => hand_model::spheremesh::default_right_hand(),
+        };
+        return Ok((method, method.model(&template)?));
     }
+    if template.is_some() {
+        bail!(
+            "--template does not apply to --model {name}: it needs a method name ({})",
+            crate::methods::names()
+        );
+    }
+    let cylinders = match name {
+        "cylinders-htrack" => default_right_hand_cylinders(),
+        p if p.ends_with(".calib") => hand_model::cylinder::load_htrack_calib(Path::new(p))?,
+        p if p.ends_with(".json") || p.starts_with("subject:") => {
+            CylinderModel::from_sphere_mesh_with_wrist(&load_sphere_mesh(p)?)?
+        }
+        other => bail!(
+            "unknown --model `{other}`: use a method ({}), `cylinders-htrack`, an htrack .calib file, a sphere-mesh .json or subject:<name>",
+            crate::methods::names()
+        ),
+    };
+    Ok((&Cylinders, Box::new(CylinderMethodModel(cylinders))))
 }
 
 /// Load the prior named by `--prior`.
@@ -197,53 +227,6 @@ pub(crate) fn read_config<T: DeserializeOwned + Default>(path: Option<&Path>) ->
     }
 }
 
-/// The cylinder tracker settings: defaults, then `--config`, then the switches.
-fn cylinder_config(args: &TrackArgs) -> Result<htrack_icp::TrackerConfig> {
-    let mut cfg: htrack_icp::TrackerConfig = read_config(args.config.as_deref())?;
-    cfg.front_facing &= !args.no_front_facing;
-    if args.no_rigid_first {
-        cfg.lm.rigid_iterations = 0;
-    }
-    let e = &mut cfg.enabled;
-    e.e3d &= !args.no_e3d;
-    e.e2d &= !args.no_e2d;
-    e.wrist &= !args.no_wrist;
-    e.collision &= !args.no_collision;
-    e.pose_prior &= !args.no_pose_prior;
-    e.joint_limits &= !args.no_joint_limits;
-    e.temporal &= !args.no_temporal;
-    Ok(cfg)
-}
-
-/// The `--m2d` mode.
-fn m2d_mode(name: &str) -> Result<M2dMode> {
-    match name {
-        "render" => Ok(M2dMode::Render),
-        "centers" => Ok(M2dMode::Centers),
-        other => bail!("unknown --m2d `{other}`: use render or centers"),
-    }
-}
-
-/// The sphere-mesh tracker settings: defaults, then `--config`, then the switches.
-fn sphere_mesh_config(args: &TrackArgs) -> Result<hmodel_spheremesh::TrackerConfig> {
-    let mut cfg: hmodel_spheremesh::TrackerConfig = read_config(args.config.as_deref())?;
-    cfg.front_facing &= !args.no_front_facing;
-    if args.no_rigid_first {
-        cfg.lm.rigid_iterations = 0;
-    }
-    if let Some(m) = &args.m2d {
-        cfg.m2d_mode = m2d_mode(m)?;
-    }
-    let e = &mut cfg.enabled;
-    e.d2m &= !args.no_d2m;
-    e.m2d &= !args.no_m2d;
-    e.collision &= !args.no_collision;
-    e.pose_prior &= !args.no_pose_prior;
-    e.joint_limits &= !args.no_joint_limits;
-    e.temporal &= !args.no_temporal;
-    Ok(cfg)
-}
-
 fn segmentation(name: &str) -> Result<Segmentation> {
     Ok(match name {
         "wristband" | "auto" => Segmentation::Wristband(WristbandParams::default()),
@@ -262,22 +245,11 @@ pub fn run(args: TrackArgs) -> Result<()> {
             args.out.display()
         );
     }
-    check_flags(&args)?;
     let prior = load_prior(&args.prior)?;
-    if args.model == SPHEREMESH {
-        let template = match &args.template {
-            Some(spec) => load_sphere_mesh(spec)?,
-            None => hand_model::spheremesh::default_right_hand(),
-        };
-        let config = sphere_mesh_config(&args)?;
-        let mut tracker = SphereMeshTracker::new(&template, config, prior.as_ref())?;
-        track_sequence(&args, &mut tracker)
-    } else {
-        let model = load_model(&args.model)?;
-        let config = cylinder_config(&args)?;
-        let mut tracker = CylinderTracker::new(&model, config, prior.as_ref())?;
-        track_sequence(&args, &mut tracker)
-    }
+    let (method, model) = load_model(&args.model, args.template.as_deref())?;
+    let settings = settings(&args, method)?;
+    let mut tracker = model.tracker(prior.as_ref(), &settings)?;
+    track_sequence(&args, tracker.as_mut())
 }
 
 /// The frame loop shared by both trackers: read, preprocess, track, write (and overlay), with

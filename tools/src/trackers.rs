@@ -3,15 +3,14 @@
 //! instead of one copy of each per model.
 
 use anyhow::Result;
-use hand_model::cylinder::{CylinderModel, CylinderRaster};
-use hand_model::kinematics::PosedSkeleton;
-use hand_model::render::{DepthRenderer, PixelHit};
-use hand_model::shape::Element;
+use hand_model::cylinder::CylinderModel;
 use hand_model::solver::PcaPrior;
-use hand_model::spheremesh::{PosedSphereMesh, SphereMeshTemplate};
+use hand_model::spheremesh::SphereMeshTemplate;
 use sensor_io::preprocess::PreprocessedFrame;
 use sensor_io::record::HandRecord;
 use sensor_io::Camera;
+
+use crate::methods::{CylinderRenderer, ModelRenderer as _, RenderedModel, SphereMeshRenderer};
 
 /// A tracker as the shared loops see it: one call per frame, plus what the visual checks and
 /// the self-evaluation metrics need to look at afterwards.
@@ -19,9 +18,14 @@ pub trait FrameTracker {
     /// Track one preprocessed frame (DESIGN.md record).
     fn track(&mut self, frame: &PreprocessedFrame, index: u64, timestamp: f64) -> HandRecord;
 
+    /// The model at the current pose seen from `camera` (pixels and depth).
+    fn model(&mut self, camera: &Camera) -> Result<&RenderedModel>;
+
     /// The pixels (linear indices `v·width + u`) where the model at the current pose is seen
     /// from `camera`: the rendered silhouette of E_m2d and of the overlays.
-    fn model_pixels(&mut self, camera: &Camera) -> Result<&[u32]>;
+    fn model_pixels(&mut self, camera: &Camera) -> Result<&[u32]> {
+        Ok(&self.model(camera)?.pixels)
+    }
 
     /// Per sensor point of the last tracked frame, the unsigned point-to-model distance (mm) of
     /// its correspondence at the last linearization (`None` without one). Empty when the
@@ -32,11 +36,7 @@ pub trait FrameTracker {
 /// The Ch. 3 sphere-mesh tracker with a renderer for its silhouette.
 pub struct SphereMeshTracker<'m> {
     tracker: hmodel_spheremesh::Tracker<'m>,
-    elements: Vec<Element>,
-    posed: PosedSphereMesh,
-    renderer: DepthRenderer,
-    hits: Vec<PixelHit>,
-    pixels: Vec<u32>,
+    view: SphereMeshRenderer<'m>,
 }
 
 impl<'m> SphereMeshTracker<'m> {
@@ -46,14 +46,9 @@ impl<'m> SphereMeshTracker<'m> {
         config: hmodel_spheremesh::TrackerConfig,
         prior: Option<&PcaPrior>,
     ) -> Result<Self> {
-        let tracker = hmodel_spheremesh::Tracker::new(template, config, prior)?;
         Ok(Self {
-            elements: template.elements.iter().map(|e| e.element).collect(),
-            posed: PosedSphereMesh::new(template, tracker.pose()),
-            tracker,
-            renderer: DepthRenderer::new(),
-            hits: Vec::new(),
-            pixels: Vec::new(),
+            tracker: hmodel_spheremesh::Tracker::new(template, config, prior)?,
+            view: SphereMeshRenderer::new(template),
         })
     }
 }
@@ -63,20 +58,9 @@ impl FrameTracker for SphereMeshTracker<'_> {
         self.tracker.track(frame, index, timestamp)
     }
 
-    fn model_pixels(&mut self, camera: &Camera) -> Result<&[u32]> {
+    fn model(&mut self, camera: &Camera) -> Result<&RenderedModel> {
         // The tracker's own posed mesh is at the last linearization, not at the returned pose.
-        self.posed
-            .update(self.tracker.template(), self.tracker.pose());
-        self.renderer.render_hits(
-            &hmodel_spheremesh::intrinsics(camera),
-            &self.posed.spheres,
-            &self.elements,
-            |_| true,
-            &mut self.hits,
-        )?;
-        self.pixels.clear();
-        self.pixels.extend(self.hits.iter().map(|h| h.pixel));
-        Ok(&self.pixels)
+        self.view.render(self.tracker.pose(), camera)
     }
 
     fn point_distances(&self) -> Vec<Option<f64>> {
@@ -91,7 +75,7 @@ impl FrameTracker for SphereMeshTracker<'_> {
 /// The Ch. 2 cylinder tracker with a raster for its silhouette.
 pub struct CylinderTracker<'m> {
     tracker: htrack_icp::Tracker<'m>,
-    raster: CylinderRaster,
+    view: CylinderRenderer<'m>,
 }
 
 impl<'m> CylinderTracker<'m> {
@@ -103,7 +87,7 @@ impl<'m> CylinderTracker<'m> {
     ) -> Result<Self> {
         Ok(Self {
             tracker: htrack_icp::Tracker::new(model, config, prior)?,
-            raster: CylinderRaster::new(),
+            view: CylinderRenderer::new(model),
         })
     }
 }
@@ -113,12 +97,8 @@ impl FrameTracker for CylinderTracker<'_> {
         self.tracker.track(frame, index, timestamp)
     }
 
-    fn model_pixels(&mut self, camera: &Camera) -> Result<&[u32]> {
-        let model = self.tracker.model();
-        let posed = PosedSkeleton::new(&model.skeleton, self.tracker.pose());
-        self.raster
-            .render(model, &posed, &hmodel_spheremesh::intrinsics(camera))?;
-        Ok(self.raster.hits())
+    fn model(&mut self, camera: &Camera) -> Result<&RenderedModel> {
+        self.view.render(self.tracker.pose(), camera)
     }
 
     fn point_distances(&self) -> Vec<Option<f64>> {

@@ -57,18 +57,174 @@ fn read_records(path: &std::path::Path) -> Vec<serde_json::Value> {
 #[test]
 fn demo_runs_on_the_embedded_default() {
     let d = tmp("demo");
-    let (ok, text) = hands(&["demo", "--frames", "6", "--out", d.to_str().expect("utf8")]);
+    let (ok, text) = hands(&[
+        "demo",
+        "--frames",
+        "6",
+        "--seed",
+        "3",
+        "--out",
+        d.to_str().expect("utf8"),
+    ]);
     assert!(ok, "{text}");
     assert!(
-        text.contains("IoU") && text.contains("keypoint error"),
+        text.contains("IoU") && text.contains("random-3") && text.contains("| spheremesh |"),
         "{text}"
     );
+    for f in [
+        "teaser.mcap",
+        "template.png",
+        "teaser-sheet.png",
+        "track-cylinders.jsonl",
+        "track-spheremesh.jsonl",
+        "metrics.json",
+        "README.md",
+        "error-under.svg",
+        "worst-frames.png",
+    ] {
+        assert!(d.join(f).exists(), "{f} missing");
+    }
+    let m: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(d.join("metrics.json")).expect("json"))
+            .expect("metrics.json");
+    let methods = m["methods"].as_array().expect("methods");
+    assert_eq!(methods.len(), 2);
+    for meth in methods {
+        assert!(meth["markers"]["mean_mm"].as_f64().expect("marker mean") < 30.0);
+        assert!(meth["e_d2m_mm"]["mean"].as_f64().expect("d2m") > 0.0);
+    }
+}
+
+/// Issue 7: `hands compare` on a tiny synthetic sequence, then `hands eval` of a track — with
+/// the mismatch errors and the missing-truth note.
+#[test]
+fn compare_and_eval_score_methods_on_one_sequence() {
+    let d = tmp("compare");
+    let s = |p: &PathBuf| p.to_str().expect("utf8").to_string();
+    let seq = d.join("seq");
+    synth_teaser(&seq, 5);
+    let report = d.join("report");
+    let (ok, text) = hands(&[
+        "compare",
+        &s(&seq),
+        "--methods",
+        "cylinders,spheremesh",
+        "--out",
+        &s(&report),
+    ]);
+    assert!(ok, "{text}");
     assert!(
-        d.join("teaser.mcap").exists()
-            && d.join("template.png").exists()
-            && d.join("teaser-sheet.png").exists()
-            && d.join("track.jsonl").exists()
+        text.contains("| cylinders |") && text.contains("| spheremesh |"),
+        "{text}"
     );
+    for f in [
+        "README.md",
+        "metrics.json",
+        "d2m.svg",
+        "m2d.svg",
+        "error.svg",
+        "error-under.svg",
+        "energies.svg",
+        "worst-frames.png",
+    ] {
+        assert!(report.join(f).exists(), "{f} missing");
+    }
+    assert_fails_clearly(
+        &[
+            "compare",
+            &s(&seq),
+            "--methods",
+            "cylinders,online",
+            "--out",
+            &s(&report),
+        ],
+        "online",
+    );
+
+    let track = d.join("track.jsonl");
+    let (ok, text) = hands(&[
+        "track",
+        &s(&seq),
+        "--model",
+        "spheremesh",
+        "--out",
+        &s(&track),
+    ]);
+    assert!(ok, "{text}");
+    let out = d.join("eval");
+    let (ok, text) = hands(&[
+        "eval",
+        &s(&track),
+        "--sequence",
+        &s(&seq),
+        "--model",
+        "spheremesh",
+        "--out",
+        &s(&out),
+    ]);
+    assert!(ok, "{text}");
+    let m: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("metrics.json")).expect("json"))
+            .expect("metrics.json");
+    assert_eq!(m["methods"][0]["frames"], 5);
+    assert!(m["methods"][0]["markers"]["mean_mm"].is_number());
+
+    // A track of another length, or with another keypoint layout: errors naming both files.
+    let lines: Vec<String> = std::fs::read_to_string(&track)
+        .expect("track")
+        .lines()
+        .map(String::from)
+        .collect();
+    let short = d.join("short.jsonl");
+    std::fs::write(&short, lines[..3].join("\n")).expect("write");
+    let args = |t: &PathBuf| {
+        vec![
+            "eval".to_string(),
+            s(t),
+            "--sequence".into(),
+            s(&seq),
+            "--model".into(),
+            "spheremesh".into(),
+            "--out".into(),
+            s(&d.join("bad")),
+        ]
+    };
+    let refs = args(&short);
+    let refs: Vec<&str> = refs.iter().map(String::as_str).collect();
+    assert_fails_clearly(&refs, "short.jsonl has 3 frames");
+    let (_, text) = hands(&refs);
+    assert!(text.contains("seq has 5"), "{text}");
+    let mut recs = read_records(&track);
+    recs[2]["keypoints"] = serde_json::json!(vec![[0.0, 0.0, 500.0]; 14]);
+    let odd = d.join("odd.jsonl");
+    let body: Vec<String> = recs.iter().map(|r| r.to_string()).collect();
+    std::fs::write(&odd, body.join("\n")).expect("write");
+    let refs = args(&odd);
+    let refs: Vec<&str> = refs.iter().map(String::as_str).collect();
+    assert_fails_clearly(&refs, "14 keypoints in frame 2");
+    assert!(
+        !d.join("bad").join("metrics.json").exists(),
+        "no report on failure"
+    );
+
+    // Without ground truth: marker metrics omitted with a note, the rest computed.
+    std::fs::remove_file(seq.join("groundtruth.jsonl")).expect("rm gt");
+    let (ok, text) = hands(&[
+        "eval",
+        &s(&track),
+        "--sequence",
+        &s(&seq),
+        "--model",
+        "spheremesh",
+        "--out",
+        &s(&out),
+    ]);
+    assert!(ok && text.contains("marker metrics omitted"), "{text}");
+    let m: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("metrics.json")).expect("json"))
+            .expect("metrics.json");
+    assert!(m["methods"][0]["markers"].is_null());
+    assert!(m["methods"][0]["e_d2m_mm"]["mean"].as_f64().expect("d2m") > 0.0);
 }
 
 #[test]

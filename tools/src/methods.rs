@@ -1,0 +1,391 @@
+//! Tracking methods behind one trait, found by name: `hands track`, `eval`, `compare` and
+//! `demo` ask this registry for "cylinders", "spheremesh", … and never name a tracker type, so
+//! a later method (online calibration, lifted correspondences) is one more entry of
+//! [`METHODS`] and appears everywhere at once.
+//!
+//! A [`Method`] builds its [`MethodModel`] of a subject (given as a sphere-mesh template, the
+//! project's common shape description); the model builds trackers ([`FrameTracker`]) and
+//! renderers ([`ModelRenderer`]: the model at any recorded pose, what the algorithm-agnostic
+//! metrics of `hands eval` need).
+
+use std::path::PathBuf;
+
+use anyhow::{bail, Result};
+use hand_model::cylinder::{CylinderModel, CylinderRaster};
+use hand_model::kinematics::{Pose, PosedSkeleton, Skeleton};
+use hand_model::render::{DepthRenderer, PixelHit};
+use hand_model::shape::Element;
+use hand_model::solver::PcaPrior;
+use hand_model::spheremesh::{PosedSphereMesh, SphereMeshTemplate};
+use hmodel_spheremesh::M2dMode;
+use sensor_io::Camera;
+
+use crate::track::read_config;
+use crate::trackers::{CylinderTracker, FrameTracker, SphereMeshTracker};
+
+/// A tracking method as the commands see it.
+pub trait Method: Sync {
+    /// The name users type (`--model`, `--methods`).
+    fn name(&self) -> &'static str;
+    /// One line for tables and `--help`.
+    fn summary(&self) -> &'static str;
+    /// The energy terms that [`TrackSettings::disabled`] may name (the `--no-<term>` switches).
+    fn terms(&self) -> &'static [&'static str];
+    /// This method's model of the subject whose sphere-mesh template is `template`.
+    fn model(&self, template: &SphereMeshTemplate) -> Result<Box<dyn MethodModel>>;
+}
+
+/// A method's model of one subject: it tracks, and it renders any pose of its skeleton.
+pub trait MethodModel {
+    /// The skeleton whose DOF names the method's records use.
+    fn skeleton(&self) -> &Skeleton;
+    /// A tracker of this model with `settings`.
+    fn tracker<'a>(
+        &'a self,
+        prior: Option<&'a PcaPrior>,
+        settings: &TrackSettings,
+    ) -> Result<Box<dyn FrameTracker + 'a>>;
+    /// A renderer of this model at arbitrary poses.
+    fn renderer(&self) -> Box<dyn ModelRenderer + '_>;
+}
+
+/// Tracker settings common to the methods: the JSON config file, then the switches.
+#[derive(Clone, Debug)]
+pub struct TrackSettings {
+    /// Tracker settings as JSON (any subset of the method's tracker config).
+    pub config: Option<PathBuf>,
+    /// Front-facing correspondences (Fig. 2.6, 3.9).
+    pub front_facing: bool,
+    /// A rigid-only first iteration (Fig. 2.17).
+    pub rigid_first: bool,
+    /// Energy terms to disable, among [`Method::terms`].
+    pub disabled: Vec<&'static str>,
+    /// Sphere-mesh E_m2d mode: `render` or `centers`.
+    pub m2d: Option<String>,
+}
+
+impl Default for TrackSettings {
+    fn default() -> Self {
+        Self {
+            config: None,
+            front_facing: true,
+            rigid_first: true,
+            disabled: Vec::new(),
+            m2d: None,
+        }
+    }
+}
+
+impl TrackSettings {
+    fn off(&self, term: &str) -> bool {
+        self.disabled.contains(&term)
+    }
+}
+
+/// Apply the switches of `TrackSettings` to a tracker config with `front_facing`, `lm` and
+/// `enabled` fields (both trackers' configs): the shared terms plus the listed own ones.
+macro_rules! apply_switches {
+    ($cfg:ident, $s:ident, [$($term:ident),*]) => {{
+        $cfg.front_facing &= $s.front_facing;
+        if !$s.rigid_first {
+            $cfg.lm.rigid_iterations = 0;
+        }
+        let e = &mut $cfg.enabled;
+        $(e.$term &= !$s.off(stringify!($term));)*
+        for (on, term) in [
+            (&mut e.collision, "collision"),
+            (&mut e.pose_prior, "pose_prior"),
+            (&mut e.joint_limits, "joint_limits"),
+            (&mut e.temporal, "temporal"),
+        ] {
+            *on &= !$s.off(term);
+        }
+    }};
+}
+
+/// Every available method, in the order of tables and plots.
+pub const METHODS: &[&dyn Method] = &[&Cylinders, &SphereMesh];
+
+/// The method called `name`; an unknown name is an error listing the available ones.
+pub fn by_name(name: &str) -> Result<&'static dyn Method> {
+    METHODS
+        .iter()
+        .copied()
+        .find(|m| m.name() == name)
+        .ok_or_else(|| anyhow::anyhow!("unknown method `{name}` (available: {})", names()))
+}
+
+/// The available method names, comma-separated.
+pub fn names() -> String {
+    METHODS
+        .iter()
+        .map(|m| m.name())
+        .collect::<Vec<_>>()
+        .join(", ")
+}
+
+/// A comma-separated list of method names (`all` = every method), without repeats.
+pub fn parse_list(list: &str) -> Result<Vec<&'static dyn Method>> {
+    if list.trim() == "all" {
+        return Ok(METHODS.to_vec());
+    }
+    let mut out: Vec<&'static dyn Method> = Vec::new();
+    for name in list.split(',').map(str::trim).filter(|s| !s.is_empty()) {
+        let m = by_name(name)?;
+        if out.iter().any(|o| o.name() == m.name()) {
+            bail!("method `{name}` is listed twice");
+        }
+        out.push(m);
+    }
+    if out.is_empty() {
+        bail!("no method given (available: {})", names());
+    }
+    Ok(out)
+}
+
+/// The model as seen from a camera: its pixels and their depth.
+#[derive(Clone, Debug, Default)]
+pub struct RenderedModel {
+    /// Linear pixel indices `v·width + u` of the model, increasing.
+    pub pixels: Vec<u32>,
+    /// Per pixel the model's depth (mm, camera z).
+    pub depth_mm: Vec<f64>,
+}
+
+/// Renders a model at arbitrary poses.
+pub trait ModelRenderer {
+    /// The model at `pose` seen from `camera`.
+    fn render(&mut self, pose: &Pose, camera: &Camera) -> Result<&RenderedModel>;
+}
+
+/// Ray-casts a sphere-mesh (§3.3.2).
+pub struct SphereMeshRenderer<'m> {
+    template: &'m SphereMeshTemplate,
+    elements: Vec<Element>,
+    posed: PosedSphereMesh,
+    renderer: DepthRenderer,
+    hits: Vec<PixelHit>,
+    out: RenderedModel,
+}
+
+impl<'m> SphereMeshRenderer<'m> {
+    /// A renderer of `template`.
+    pub fn new(template: &'m SphereMeshTemplate) -> Self {
+        Self {
+            template,
+            elements: template.elements.iter().map(|e| e.element).collect(),
+            posed: PosedSphereMesh::new(template, &Pose::zeros(&template.skeleton)),
+            renderer: DepthRenderer::new(),
+            hits: Vec::new(),
+            out: RenderedModel::default(),
+        }
+    }
+}
+
+impl ModelRenderer for SphereMeshRenderer<'_> {
+    fn render(&mut self, pose: &Pose, camera: &Camera) -> Result<&RenderedModel> {
+        self.posed.update(self.template, pose);
+        self.renderer.render_hits(
+            &hmodel_spheremesh::intrinsics(camera),
+            &self.posed.spheres,
+            &self.elements,
+            |_| true,
+            &mut self.hits,
+        )?;
+        self.out.pixels.clear();
+        self.out.depth_mm.clear();
+        for h in &self.hits {
+            self.out.pixels.push(h.pixel);
+            self.out.depth_mm.push(h.point.z);
+        }
+        Ok(&self.out)
+    }
+}
+
+/// Rasterizes a cylinder model (Ch. 2).
+pub struct CylinderRenderer<'m> {
+    model: &'m CylinderModel,
+    raster: CylinderRaster,
+    out: RenderedModel,
+}
+
+impl<'m> CylinderRenderer<'m> {
+    /// A renderer of `model`.
+    pub fn new(model: &'m CylinderModel) -> Self {
+        Self {
+            model,
+            raster: CylinderRaster::new(),
+            out: RenderedModel::default(),
+        }
+    }
+}
+
+impl ModelRenderer for CylinderRenderer<'_> {
+    fn render(&mut self, pose: &Pose, camera: &Camera) -> Result<&RenderedModel> {
+        let posed = PosedSkeleton::new(&self.model.skeleton, pose);
+        self.raster
+            .render(self.model, &posed, &hmodel_spheremesh::intrinsics(camera))?;
+        self.out.pixels.clear();
+        self.out.depth_mm.clear();
+        for &k in self.raster.hits() {
+            if let Some(hit) = self.raster.hit(k as usize) {
+                self.out.pixels.push(k);
+                self.out.depth_mm.push(hit.point.z);
+            }
+        }
+        Ok(&self.out)
+    }
+}
+
+/// The Ch. 2 method: articulated ICP on cylinders fitted to the subject (with a wrist segment).
+pub struct Cylinders;
+
+/// A cylinder model as a [`MethodModel`].
+pub struct CylinderMethodModel(pub CylinderModel);
+
+impl Method for Cylinders {
+    fn name(&self) -> &'static str {
+        "cylinders"
+    }
+    fn summary(&self) -> &'static str {
+        "Ch. 2 articulated ICP, cylinders fitted to the subject"
+    }
+    fn terms(&self) -> &'static [&'static str] {
+        &[
+            "e3d",
+            "e2d",
+            "wrist",
+            "collision",
+            "pose_prior",
+            "joint_limits",
+            "temporal",
+        ]
+    }
+    fn model(&self, template: &SphereMeshTemplate) -> Result<Box<dyn MethodModel>> {
+        Ok(Box::new(CylinderMethodModel(
+            CylinderModel::from_sphere_mesh_with_wrist(template)?,
+        )))
+    }
+}
+
+impl MethodModel for CylinderMethodModel {
+    fn skeleton(&self) -> &Skeleton {
+        &self.0.skeleton
+    }
+
+    fn tracker<'a>(
+        &'a self,
+        prior: Option<&'a PcaPrior>,
+        s: &TrackSettings,
+    ) -> Result<Box<dyn FrameTracker + 'a>> {
+        let mut cfg: htrack_icp::TrackerConfig = read_config(s.config.as_deref())?;
+        apply_switches!(cfg, s, [e3d, e2d, wrist]);
+        Ok(Box::new(CylinderTracker::new(&self.0, cfg, prior)?))
+    }
+
+    fn renderer(&self) -> Box<dyn ModelRenderer + '_> {
+        Box::new(CylinderRenderer::new(&self.0))
+    }
+}
+
+/// The Ch. 3 method: the sphere-mesh tracker on the subject's template.
+pub struct SphereMesh;
+
+/// A sphere-mesh template as a [`MethodModel`].
+pub struct SphereMeshMethodModel(pub SphereMeshTemplate);
+
+impl Method for SphereMesh {
+    fn name(&self) -> &'static str {
+        "spheremesh"
+    }
+    fn summary(&self) -> &'static str {
+        "Ch. 3 sphere-mesh tracker on the subject's template"
+    }
+    fn terms(&self) -> &'static [&'static str] {
+        &[
+            "d2m",
+            "m2d",
+            "collision",
+            "pose_prior",
+            "joint_limits",
+            "temporal",
+        ]
+    }
+    fn model(&self, template: &SphereMeshTemplate) -> Result<Box<dyn MethodModel>> {
+        Ok(Box::new(SphereMeshMethodModel(template.clone())))
+    }
+}
+
+/// The `--m2d` mode.
+fn m2d_mode(name: &str) -> Result<M2dMode> {
+    match name {
+        "render" => Ok(M2dMode::Render),
+        "centers" => Ok(M2dMode::Centers),
+        other => bail!("unknown --m2d `{other}`: use render or centers"),
+    }
+}
+
+impl MethodModel for SphereMeshMethodModel {
+    fn skeleton(&self) -> &Skeleton {
+        &self.0.skeleton
+    }
+
+    fn tracker<'a>(
+        &'a self,
+        prior: Option<&'a PcaPrior>,
+        s: &TrackSettings,
+    ) -> Result<Box<dyn FrameTracker + 'a>> {
+        let mut cfg: hmodel_spheremesh::TrackerConfig = read_config(s.config.as_deref())?;
+        if let Some(m) = &s.m2d {
+            cfg.m2d_mode = m2d_mode(m)?;
+        }
+        apply_switches!(cfg, s, [d2m, m2d]);
+        Ok(Box::new(SphereMeshTracker::new(&self.0, cfg, prior)?))
+    }
+
+    fn renderer(&self) -> Box<dyn ModelRenderer + '_> {
+        Box::new(SphereMeshRenderer::new(&self.0))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn methods_are_found_by_name_and_lists_are_checked() {
+        assert_eq!(
+            by_name("spheremesh").map(|m| m.name()).ok(),
+            Some("spheremesh")
+        );
+        let e = by_name("online")
+            .err()
+            .map(|e| e.to_string())
+            .unwrap_or_default();
+        assert!(e.contains("online") && e.contains("cylinders"), "{e}");
+        assert_eq!(parse_list("all").map(|l| l.len()).ok(), Some(METHODS.len()));
+        assert!(parse_list("cylinders,cylinders").is_err());
+        assert!(parse_list(" , ").is_err());
+    }
+
+    #[test]
+    fn both_models_render_the_rest_pose_in_front_of_the_camera() {
+        let template = hand_model::spheremesh::default_right_hand();
+        let camera = Camera::sr300_qvga();
+        for m in METHODS {
+            let model = m.model(&template).expect("model");
+            let mut pose = Pose::zeros(model.skeleton());
+            pose.set(model.skeleton(), "global_tz", 400.0).expect("tz");
+            let mut r = model.renderer();
+            let out = r.render(&pose, &camera).expect("render");
+            assert!(out.pixels.len() > 500, "{}: {}", m.name(), out.pixels.len());
+            assert_eq!(out.depth_mm.len(), out.pixels.len());
+            assert!(out.pixels.windows(2).all(|w| w[0] < w[1]), "{}", m.name());
+            assert!(
+                out.depth_mm.iter().all(|d| (300.0..500.0).contains(d)),
+                "{}",
+                m.name()
+            );
+        }
+    }
+}
