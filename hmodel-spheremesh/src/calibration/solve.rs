@@ -352,6 +352,8 @@ struct Problem<'a> {
     jacobian: FootpointJacobian,
     config: &'a CalibrationConfig,
     nd: usize,
+    /// Per pose DOF whether it is a global (root) one.
+    global: Vec<bool>,
 }
 
 impl Problem<'_> {
@@ -846,6 +848,12 @@ pub fn calibrate(
         exempt,
         config,
         nd,
+        global: base
+            .skeleton
+            .dofs()
+            .iter()
+            .map(|d| base.skeleton.bones()[d.bone].parent.is_none())
+            .collect(),
     };
     let state = State {
         template: problem.space.template(base, &initial)?,
@@ -923,9 +931,12 @@ impl Descent {
         let so = problem.shape_offset();
         for it in 0..iterations {
             let t = Instant::now();
-            // Alternating: even iterations step the shape, odd ones the poses.
+            // Alternating: even iterations step the shape, odd ones the poses. The scaling
+            // stage moves only the global poses with the scale: finger angles free to follow
+            // a wrong size drift into poses the full stage cannot leave.
             let fixed = |i: usize| {
                 (!config.fit_shape && i >= so)
+                    || (stage == Stage::Scaling && i < so && !problem.global[i % problem.nd])
                     || match config.schedule {
                         Schedule::Joint => false,
                         Schedule::Alternating => (i >= so) == (it % 2 == 1),
