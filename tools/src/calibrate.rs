@@ -1,19 +1,24 @@
 //! `hands calibrate`: offline multi-frame calibration of the sphere-mesh template (thesis §3.4)
 //! from a recorded or synthetic sequence of the user's hand.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 use anyhow::{bail, Context, Result};
 use clap::Args;
 use eval::plot::{line_plot_svg, Series};
 use hand_model::kinematics::Pose;
+use hand_model::query::SphereMeshGeometry;
 use hand_model::solver::PcaPrior;
+use hand_model::spheremesh::{PosedSphereMesh, SphereMeshTemplate};
 use hmodel_spheremesh::calibration::{
     calibrate, select_frames, CalibrationConfig, CalibrationFrame,
 };
 use hmodel_spheremesh::{Tracker, TrackerConfig};
+use image::{GenericImage, RgbImage};
 use sensor_io::io::write_atomic;
 
+use crate::methods::{ModelRenderer, SphereMeshRenderer};
+use crate::overlay;
 use crate::track::{for_each_frame, load_sphere_mesh, read_config};
 
 /// Calibrate the sphere-mesh template to a sequence: the sequence is tracked with the starting
@@ -38,7 +43,10 @@ pub struct CalibrateArgs {
     /// Output template (`.json`, the format `--template` of `hands track` reads).
     #[arg(long)]
     pub out: PathBuf,
-    /// Also write a report folder: per-iteration energies (`iterations.json`, `energy.svg`).
+    /// Also write a report folder: per-iteration energies (`iterations.json`, `energy.svg`) and
+    /// per chosen frame the model before and after calibration over the data
+    /// (`overlay-NNNNNN.png`, left before, right after; points colored by their distance to
+    /// the model, green 0 → red ≥ 10 mm).
     #[arg(long)]
     pub report: Option<PathBuf>,
     /// Calibration settings (JSON of `CalibrationConfig`; missing fields keep their defaults).
@@ -173,7 +181,78 @@ pub fn run(args: CalibrateArgs) -> Result<()> {
             None,
         )?;
         write_atomic(&dir.join("energy.svg"), svg.as_bytes())?;
+        write_overlays(
+            &args,
+            dir,
+            &chosen,
+            (&base, &init),
+            (&cal.template, &cal.poses),
+        )?;
         eprintln!("report → {}", dir.display());
     }
     Ok(())
+}
+
+/// One image per chosen frame: the overlay of the starting template at its initial pose beside
+/// the calibrated template at its optimized pose (the sequence is read a second time for the
+/// chosen frames only, so the tracking pass keeps no depth images).
+fn write_overlays(
+    args: &CalibrateArgs,
+    dir: &Path,
+    chosen: &[usize],
+    before: (&SphereMeshTemplate, &[Pose]),
+    after: (&SphereMeshTemplate, &[Pose]),
+) -> Result<()> {
+    let mut renderers = [
+        SphereMeshRenderer::new(before.0),
+        SphereMeshRenderer::new(after.0),
+    ];
+    let poses = [before.1, after.1];
+    let templates = [before.0, after.0];
+    for_each_frame(
+        &args.sequence,
+        &args.segmentation,
+        args.points,
+        args.max_frames,
+        "overlays",
+        |sf| {
+            let Some(k) = chosen.iter().position(|&c| c == sf.position) else {
+                return Ok(());
+            };
+            let Some(camera) = sf.pre.camera.as_ref() else {
+                return Ok(());
+            };
+            let mut panels = Vec::with_capacity(2);
+            for side in 0..2 {
+                let pose = &poses[side][k];
+                let pixels = renderers[side].render(pose, camera)?.pixels.clone();
+                let distances = point_distances(templates[side], pose, &sf.pre.points)?;
+                panels.push(overlay::compose(sf.pre, &pixels, &distances));
+            }
+            let (w, h) = (panels[0].width(), panels[0].height());
+            let mut image = RgbImage::new(2 * w, h);
+            for (side, panel) in panels.iter().enumerate() {
+                image.copy_from(panel, side as u32 * w, 0)?;
+            }
+            let path = dir.join(format!("overlay-{:06}.png", sf.position));
+            hand_model::render::preview::write_png(&path, &image)
+                .with_context(|| format!("writing {}", path.display()))
+        },
+    )?;
+    Ok(())
+}
+
+/// Per point its unsigned distance to the surface of `template` at `pose` (Eq. 3.6's φ).
+fn point_distances(
+    template: &SphereMeshTemplate,
+    pose: &Pose,
+    points: &[nalgebra::Vector3<f64>],
+) -> Result<Vec<Option<f64>>> {
+    let posed = PosedSphereMesh::new(template, pose);
+    let elements: Vec<_> = template.elements.iter().map(|e| e.element).collect();
+    let geometry = SphereMeshGeometry::new(&posed.spheres, &elements)?;
+    Ok(points
+        .iter()
+        .map(|p| geometry.phi(p).map(f64::abs))
+        .collect())
 }

@@ -730,6 +730,20 @@ fn calibrate_writes_a_template_the_tracker_reads() {
     ]);
     assert!(ok, "{text}");
     assert!(report.join("iterations.json").exists() && report.join("energy.svg").exists());
+    let overlays: Vec<_> = std::fs::read_dir(&report)
+        .expect("report folder")
+        .filter_map(|e| e.ok())
+        .filter(|e| e.file_name().to_string_lossy().starts_with("overlay-"))
+        .collect();
+    assert_eq!(
+        overlays.len(),
+        4,
+        "one before/after overlay per chosen frame"
+    );
+    let image = image::open(overlays[0].path())
+        .expect("overlay png")
+        .to_rgb8();
+    assert_eq!(image.width(), 2 * 320, "before and after side by side");
     let error = |template: Option<&PathBuf>| {
         let out = d.join("t.jsonl");
         let mut args = vec![
