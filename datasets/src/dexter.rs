@@ -13,6 +13,17 @@ use std::path::Path;
 use crate::error::Result;
 use crate::text::{parse_error, parse_point_rows, parse_points, read_text};
 
+/// The seven Dexter-1 sequences.
+pub const DEXTER_SEQUENCES: [&str; 7] = [
+    "adbadd",
+    "fingercount",
+    "fingerwave",
+    "flexex1",
+    "pinch",
+    "random",
+    "tigergrasp",
+];
+
 /// Points per ground-truth frame (5 fingertips + palm).
 pub const DEXTER_POINTS: usize = 6;
 

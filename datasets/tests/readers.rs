@@ -5,23 +5,14 @@
 use std::path::{Path, PathBuf};
 
 use datasets::dexter::{
-    is_annotated, read_ground_truth, read_htrack_output, DEXTER_POINTS, HTRACK_JOINTS,
+    is_annotated, read_ground_truth, read_htrack_output, DEXTER_POINTS, DEXTER_SEQUENCES,
+    HTRACK_JOINTS,
 };
 use datasets::handy::{HandySequence, HANDY_MARKERS};
 use datasets::nyu::{depth_path, read_depth, read_uvd_labels, read_xyz_labels, NYU_JOINTS};
 use datasets::reference::reference_path;
 use sensor_io::io::{write_color_png, write_depth_png};
 use sensor_io::{ColorImage, DepthImage};
-
-const SEQUENCES: [&str; 7] = [
-    "adbadd",
-    "fingercount",
-    "fingerwave",
-    "flexex1",
-    "pinch",
-    "random",
-    "tigergrasp",
-];
 
 fn fixture_dir(name: &str) -> PathBuf {
     let d = Path::new(env!("CARGO_TARGET_TMPDIR")).join(format!("readers-{name}"));
@@ -78,7 +69,7 @@ fn dexter_files_on_the_real_files() {
         return;
     };
     let (mut frames, mut annotated) = (0, 0);
-    for seq in SEQUENCES {
+    for seq in DEXTER_SEQUENCES {
         let gt = read_ground_truth(&dir.join(format!("groundtruth/{seq}.txt"))).unwrap();
         let out = read_htrack_output(&dir.join(format!("htrack/{seq}.txt"))).unwrap();
         let reinit = read_htrack_output(&dir.join(format!("htrack_reinit/{seq}.txt"))).unwrap();

@@ -12,6 +12,7 @@
 //!
 //! Still to come (issue 7): `hands eval|compare|demo`.
 
+pub mod benchmarks;
 pub mod depth_metrics;
 pub mod error;
 pub mod markers;
