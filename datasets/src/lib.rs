@@ -23,7 +23,7 @@
 //!   `marker_positions.txt`);
 //! - [`nyu`]: NYU depth PNGs (`(G << 8) | B`) and 14-joint uvd labels → camera-frame mm;
 //! - [`dexter`]: Dexter-1 Pos3D fingertip ground truth and htrack's 24-joint outputs;
-//! - [`text`]: the numeric text parsing they share; [`reference`]: where tests find
+//! - [`text`]: the numeric text parsing they share; [`reference`](mod@reference): where tests find
 //!   `shared/reference`.
 
 pub mod animbank;

@@ -17,7 +17,9 @@
 //! The rendered model's background is depth 0 or any depth ≥ [`ModelDepth::FAR_MM`] (external
 //! renderings use 5000, the original ray tracers 32767).
 
-use hand_model::render::DepthRender;
+use hand_model::kinematics::Pose;
+use hand_model::render::{render_depth, DepthRender};
+use hand_model::spheremesh::{PosedSphereMesh, SphereMeshTemplate};
 use kiddo::{ImmutableKdTree, SquaredEuclidean};
 use sensor_io::dt::DistanceTransform;
 use sensor_io::{Camera, DepthImage, Mask};
@@ -307,6 +309,24 @@ pub fn depth_metrics(
     })
 }
 
+/// A posed sphere-mesh template rendered from `camera` by the CPU ray caster (§3.3.2): the model
+/// depth the metrics compare with the sensor. Refused: a camera the renderer rejects.
+pub fn render_sphere_mesh(
+    template: &SphereMeshTemplate,
+    pose: &Pose,
+    camera: &Camera,
+) -> Result<ModelDepth> {
+    let posed = PosedSphereMesh::new(template, pose);
+    let elements: Vec<_> = template.elements.iter().map(|e| e.element).collect();
+    let render = render_depth(
+        &hmodel_spheremesh::intrinsics(camera),
+        &posed.spheres,
+        &elements,
+    )
+    .map_err(|e| EvalError::arg("camera", e.to_string()))?;
+    ModelDepth::from_render(&render)
+}
+
 /// The silhouette of a depth image: every pixel with a depth (a sensor frame already segmented
 /// to the hand, or a rendering).
 pub fn silhouette(depth: &DepthImage) -> Mask {
@@ -402,9 +422,7 @@ mod tests {
         // sensor point is within 0.5 mm of depth (the rounding), i.e. 0.5·‖(a, b, 1)‖ mm along
         // its ray, of its own rendered point (‖(a, b, 1)‖ < 1.25 over this image), the mean is
         // about a quarter millimetre, and the silhouettes coincide.
-        use hand_model::kinematics::Pose;
-        use hand_model::render::{render_depth, Intrinsics};
-        use hand_model::spheremesh::{default_right_hand, PosedSphereMesh};
+        use hand_model::spheremesh::default_right_hand;
         let t = default_right_hand();
         let mut pose = Pose::zeros(&t.skeleton);
         for (name, v) in [
@@ -414,31 +432,27 @@ mod tests {
         ] {
             pose.set(&t.skeleton, name, v).unwrap();
         }
-        let posed = PosedSphereMesh::new(&t, &pose);
-        let elements: Vec<_> = t.elements.iter().map(|e| e.element).collect();
         let cam = Camera::sr300_qvga();
-        let intr = Intrinsics {
-            fx: cam.fx,
-            fy: cam.fy,
-            cx: cam.cx,
-            cy: cam.cy,
-            width: cam.width,
-            height: cam.height,
-        };
-        let render = render_depth(&intr, &posed.spheres, &elements).unwrap();
-        assert!(render.hit_count() > 1000);
-        let sensor = DepthImage::from_data(cam.width, cam.height, render.depth_u16()).unwrap();
+        let model = render_sphere_mesh(&t, &pose, &cam).unwrap();
+        let hits = model.rendered_count();
+        assert!(hits > 1000);
+        let sensor = DepthImage::from_data(
+            cam.width,
+            cam.height,
+            model.depth.iter().map(|&z| z.round() as u16).collect(),
+        )
+        .unwrap();
         let m = depth_metrics(
             &sensor,
             &silhouette(&sensor),
-            &ModelDepth::from_render(&render).unwrap(),
+            &model,
             &cam,
             &mut DepthMetricsScratch::default(),
         )
         .unwrap();
         let d2m = m.d2m.unwrap();
         assert!(d2m.max <= 0.5 * 1.25 && d2m.mean < 0.3, "{d2m:?}");
-        assert_eq!(d2m.sensor_points, render.hit_count());
+        assert_eq!(d2m.sensor_points, hits);
         assert_eq!(m.m2d.unwrap().outside_pixels, 0);
     }
 

@@ -88,6 +88,8 @@ pub struct FrameFit {
     pub initial_energy: f64,
     /// The 21 DESIGN.md keypoints of the fit (camera frame, mm).
     pub keypoints: Vec<[f64; 3]>,
+    /// The preprocessed frame that was fitted (processed depth, camera, silhouette, points).
+    pub frame: PreprocessedFrame,
     /// Segmented silhouette pixels (at the processed resolution).
     pub silhouette_pixels: usize,
     /// Points fitted.
@@ -205,6 +207,7 @@ pub fn fit_depth_frame(
             energy,
             initial_energy: fit.initial_energy,
             keypoints,
+            frame: PreprocessedFrame::default(),
             silhouette_pixels: out.hand.count,
             points: out.points.len(),
             seconds: 0.0,
@@ -241,6 +244,7 @@ pub fn fit_depth_frame(
             break;
         }
     }
+    best.frame = out;
     best.seconds = start.elapsed().as_secs_f64();
     Ok(best)
 }

@@ -9,6 +9,7 @@
 
 use datasets::nyu::{depth_path, read_depth, read_xyz_labels, NYU_JOINT_NAMES};
 use datasets::reference::reference_path;
+use eval::depth_metrics::{depth_metrics, render_sphere_mesh, DepthMetricsScratch};
 use eval::markers::frame_error;
 use eval::real_frame::{fit_depth_frame, nyu_joints_from_keypoints, FitConfig, FINGER_JOINTS};
 use hand_model::spheremesh::default_right_hand;
@@ -62,5 +63,31 @@ fn nyu_frame_1_fit_error() {
             .sqrt();
         println!("  {name:12} {d:6.1} mm");
     }
+    // The algorithm-agnostic depth metrics of the fit (Eq. 3.15–3.16) against the segmented
+    // sensor frame it was fitted to.
+    let f = &fit.frame;
+    let cam = f.camera.clone().unwrap();
+    let model = render_sphere_mesh(&fit.template, &fit.pose, &cam).unwrap();
+    let m = depth_metrics(
+        &f.depth,
+        &f.hand.mask,
+        &model,
+        &cam,
+        &mut DepthMetricsScratch::default(),
+    )
+    .unwrap();
+    let (d2m, m2d) = (m.d2m.unwrap(), m.m2d.unwrap());
+    println!(
+        "NYU frame 1 fit: E_d2m {:.2} mm over {} sensor points, E_m2d {:.2} px over {} of {} \
+         rendered px outside the silhouette ({}×{})",
+        d2m.mean,
+        d2m.sensor_points,
+        m2d.mean,
+        m2d.outside_pixels,
+        m2d.model_pixels,
+        cam.width,
+        cam.height
+    );
     assert!(all.mean.is_finite() && fit.energy <= fit.initial_energy);
+    assert!(d2m.mean.is_finite() && m2d.mean.is_finite());
 }
