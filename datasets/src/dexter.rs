@@ -6,9 +6,15 @@
 //! - htrack output `<seq>.txt`: one line per frame of 72 numbers, 24 joints × (x, y, z) mm; the
 //!   fingertips are joints 8, 24, 20, 16, 12 (1-based, [`HTRACK_FINGERTIPS`]), paired in that
 //!   order with the 5 ground-truth fingertips, whose x must be negated (the dataset's camera is
-//!   mirrored with respect to htrack's).
+//!   mirrored with respect to htrack's);
+//! - ToF depth frames `%04d.png` (16-bit, mm, 320×240, Creative Senz3D:
+//!   [`sensor_io::Camera::creative_qvga`]), where values ≥ [`TOF_NO_DEPTH`] mark pixels without a
+//!   measurement (honline's SRIDHAR loader keeps `depth < 32001` as the silhouette candidates).
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
+
+use sensor_io::io::read_depth_png;
+use sensor_io::DepthImage;
 
 use crate::error::Result;
 use crate::text::{parse_error, parse_point_rows, parse_points, read_text};
@@ -23,6 +29,26 @@ pub const DEXTER_SEQUENCES: [&str; 7] = [
     "random",
     "tigergrasp",
 ];
+
+/// ToF depth values at or above this carry no measurement.
+pub const TOF_NO_DEPTH: u16 = 32001;
+
+/// The depth file of frame `k` in a sequence folder: `%04d.png`.
+pub fn tof_depth_path(dir: &Path, k: usize) -> PathBuf {
+    dir.join(format!("{k:04}.png"))
+}
+
+/// Read a ToF depth frame (16-bit PNG, mm) with the no-measurement values (≥ [`TOF_NO_DEPTH`])
+/// set to 0, the DESIGN.md "no depth". Refused: unreadable, corrupt or non-16-bit PNGs (named).
+pub fn read_tof_depth(path: &Path) -> Result<DepthImage> {
+    let mut d = read_depth_png(path)?;
+    for v in &mut d.data {
+        if *v >= TOF_NO_DEPTH {
+            *v = 0;
+        }
+    }
+    Ok(d)
+}
 
 /// Points per ground-truth frame (5 fingertips + palm).
 pub const DEXTER_POINTS: usize = 6;
@@ -161,6 +187,21 @@ mod tests {
         let run_on = format!("{}{}", gt_block(1.0), gt_block(1.0));
         assert!(parse_ground_truth(&run_on, f).is_err());
         assert!(parse_ground_truth("", f).unwrap().is_empty());
+    }
+
+    #[test]
+    fn tof_depth_fixture() {
+        let dir = std::env::temp_dir().join(format!("dexter-tof-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let d = DepthImage::from_data(3, 1, vec![450, 32001, 65535]).unwrap();
+        let p = tof_depth_path(&dir, 7);
+        assert!(p.ends_with("0007.png"));
+        sensor_io::io::write_depth_png(&p, &d).unwrap();
+        assert_eq!(read_tof_depth(&p).unwrap().data, vec![450, 0, 0]);
+        std::fs::write(&p, b"not a png").unwrap();
+        let e = read_tof_depth(&p).unwrap_err().to_string();
+        assert!(e.contains("0007.png"), "{e}");
+        std::fs::remove_dir_all(&dir).unwrap();
     }
 
     #[test]

@@ -22,7 +22,8 @@
 //! - [`handy`]: the Handy/teaser sequence layout (`depth-%07d.png`, `color-%07d.png`,
 //!   `marker_positions.txt`);
 //! - [`nyu`]: NYU depth PNGs (`(G << 8) | B`) and 14-joint uvd labels → camera-frame mm;
-//! - [`dexter`]: Dexter-1 Pos3D fingertip ground truth and htrack's 24-joint outputs;
+//! - [`dexter`]: Dexter-1 Pos3D fingertip ground truth, ToF depth frames and htrack's 24-joint
+//!   outputs;
 //! - [`text`]: the numeric text parsing they share; [`reference`](mod@reference): where tests find
 //!   `shared/reference`.
 
