@@ -7,7 +7,7 @@
 //! 2. initialization: the template's rest centroid placed on the centroid of the segmented cloud
 //!    (pushed [`FitConfig::depth_offset`] behind it, since the cloud is the visible surface) in a
 //!    fixed upright orientation (fingers toward the image top), palm toward the camera or away
-//!    from it;
+//!    from it, fingers straight or half bent ([`FitConfig::bends`]);
 //! 3. for each uniform latent scale of [`FitConfig::scales`] (Eq. 4.14 with the three factors
 //!    equal, [`ShapeBasis::from_latent`]) and each orientation, a pose-only Levenberg–Marquardt
 //!    fit of the thesis' d2m + m2d energy ([`calibrate`] with `fit_shape: false`, §3.4 weights);
@@ -25,7 +25,7 @@ use std::time::Instant;
 use datasets::nyu::{NyuJoints, NYU_JOINTS};
 use hand_model::kinematics::Pose;
 use hand_model::math::matrix_to_euler_xyz;
-use hand_model::spheremesh::{PosedSphereMesh, ShapeBasis, SphereMeshTemplate};
+use hand_model::spheremesh::{Attachment, PosedSphereMesh, ShapeBasis, SphereMeshTemplate};
 use hmodel_spheremesh::calibration::{calibrate, Calibration, CalibrationConfig, CalibrationFrame};
 use nalgebra::{Matrix3, Vector3};
 use sensor_io::preprocess::{PreprocessConfig, PreprocessedFrame, Preprocessor};
@@ -46,6 +46,9 @@ pub struct FitConfig {
     pub latent_bounds: [f64; 2],
     /// Rounds of the coordinate search.
     pub latent_rounds: usize,
+    /// Finger flexions (rad, every non-global `flex` DOF, clamped to its limits) of the initial
+    /// hypotheses.
+    pub bends: Vec<f64>,
     /// LM iterations per hypothesis.
     pub iterations: usize,
     /// How far behind the cloud's centroid the model's rest centroid starts (mm).
@@ -64,6 +67,7 @@ impl Default for FitConfig {
             latent_step: 0.1,
             latent_bounds: [0.7, 1.5],
             latent_rounds: 2,
+            bends: vec![0.0, 0.5],
             iterations: 25,
             depth_offset: 15.0,
         }
@@ -181,44 +185,54 @@ pub fn fit_depth_frame(
         iterations: config.iterations,
         ..CalibrationConfig::default()
     };
-    let solve = |latent: [f64; 3], init: Option<&Pose>, palm: bool| -> Result<FrameFit> {
-        let template = basis
-            .apply(base, &basis.from_latent(latent))
-            .map_err(|e| EvalError::arg("scales", e.to_string()))?;
-        let init = init.cloned().unwrap_or_else(|| {
-            let mut p = Pose::zeros(&template.skeleton);
-            place_pose(&template, &mut p, &upright(palm), &target);
-            p
-        });
-        let fit = calibrate(&template, std::slice::from_ref(&data), &[init], &cal)
-            .map_err(|e| EvalError::arg("fit", e.to_string()))?;
-        let energy = best_energy(&fit);
-        let pose = fit.poses[0].clone();
-        let keypoints = PosedSphereMesh::new(&template, &pose)
-            .keypoints(&template)
-            .iter()
-            .map(|p| [p.x, p.y, p.z])
-            .collect();
-        Ok(FrameFit {
-            template,
-            pose,
-            latent,
-            palm_toward_camera: palm,
-            energy,
-            initial_energy: fit.initial_energy,
-            keypoints,
-            frame: PreprocessedFrame::default(),
-            silhouette_pixels: out.hand.count,
-            points: out.points.len(),
-            seconds: 0.0,
-        })
-    };
+    let solve =
+        |latent: [f64; 3], init: Option<&Pose>, palm: bool, bend: f64| -> Result<FrameFit> {
+            let template = basis
+                .apply(base, &basis.from_latent(latent))
+                .map_err(|e| EvalError::arg("scales", e.to_string()))?;
+            let init = init.cloned().unwrap_or_else(|| {
+                let sk = &template.skeleton;
+                let mut p = Pose::zeros(sk);
+                for d in sk.dofs() {
+                    if d.name.contains("flex") && !d.name.starts_with("global") {
+                        let _ = p.set(sk, &d.name, bend);
+                    }
+                }
+                p.clamp_to_limits(sk);
+                place_pose(&template, &mut p, &upright(palm), &target);
+                p
+            });
+            let fit = calibrate(&template, std::slice::from_ref(&data), &[init], &cal)
+                .map_err(|e| EvalError::arg("fit", e.to_string()))?;
+            let energy = best_energy(&fit);
+            let pose = fit.poses[0].clone();
+            let keypoints = PosedSphereMesh::new(&template, &pose)
+                .keypoints(&template)
+                .iter()
+                .map(|p| [p.x, p.y, p.z])
+                .collect();
+            Ok(FrameFit {
+                template,
+                pose,
+                latent,
+                palm_toward_camera: palm,
+                energy,
+                initial_energy: fit.initial_energy,
+                keypoints,
+                frame: PreprocessedFrame::default(),
+                silhouette_pixels: out.hand.count,
+                points: out.points.len(),
+                seconds: 0.0,
+            })
+        };
     let mut best: Option<FrameFit> = None;
     for &scale in &config.scales {
         for palm in [true, false] {
-            let fit = solve([scale; 3], None, palm)?;
-            if best.as_ref().is_none_or(|b| fit.energy < b.energy) {
-                best = Some(fit);
+            for &bend in &config.bends {
+                let fit = solve([scale; 3], None, palm, bend)?;
+                if best.as_ref().is_none_or(|b| fit.energy < b.energy) {
+                    best = Some(fit);
+                }
             }
         }
     }
@@ -233,7 +247,7 @@ pub fn fit_depth_frame(
                 if config.latent_step <= 0.0 || latent == best.latent {
                     continue;
                 }
-                let fit = solve(latent, Some(&best.pose), best.palm_toward_camera)?;
+                let fit = solve(latent, Some(&best.pose), best.palm_toward_camera, 0.0)?;
                 if fit.energy < best.energy {
                     best = fit;
                     improved = true;
@@ -249,45 +263,42 @@ pub fn fit_depth_frame(
     Ok(best)
 }
 
-/// How one NYU joint is read off the 21 DESIGN.md keypoints.
+/// How one NYU joint is read off a posed sphere-mesh.
 #[derive(Copy, Clone, Debug, PartialEq)]
 pub enum NyuJointSource {
-    /// The point at `fraction` of the arc length of a keypoint chain (first to last).
+    /// The point at `fraction` of the arc length of a chain of DESIGN.md keypoints.
     Chain {
         /// Keypoint indices from the base of the chain to its tip.
         chain: [usize; 4],
         /// Fraction of the chain's length from its base.
         fraction: f64,
     },
-    /// `a + f·(b − c)`: a keypoint offset along the difference of two others.
-    Offset {
-        /// Base keypoint.
-        a: usize,
-        /// Difference `b − c`.
-        b: usize,
-        /// Difference `b − c`.
-        c: usize,
-        /// Factor.
-        f: f64,
+    /// A named sphere's center moved by `offset` radii along the axes of the bone the sphere
+    /// is attached to (honline's palm markers).
+    Sphere {
+        /// Sphere name (the honline names of the template).
+        name: &'static str,
+        /// Offset in radii, in the bone frame (x, y toward the fingers, z).
+        offset: [f64; 3],
     },
-    /// The midpoint of two keypoints.
-    Mid(usize, usize),
 }
 
-/// The keypoint mapping of the 14 NYU joints ([`datasets::nyu::NYU_JOINT_NAMES`]).
+/// The mapping of the 14 NYU joints ([`datasets::nyu::NYU_JOINT_NAMES`]) onto the model.
 ///
-/// NYU's 14 joints are 14 of its 36 markers; honline's `GroundTruthLoader` reproduces the
-/// finger markers as 5 points along the chain from the finger base to the tip end, at arc
-/// fractions 1, 19/24, 14/24, 9/24, 1/6 (tip first). The 14-joint set keeps markers 0 and 3 of
-/// each finger (fractions 1 and 0.375 along MCP→PIP→DIP→tip), markers 0, 1, 3 of the thumb
-/// (1, 0.79, 0.375 along CMC→MCP→IP→tip) and three palm markers: the two wrist-side palm points
-/// (NYU joint 11 on the pinky side, 12 on the thumb side, read off the image of test frame 1)
-/// modeled as the wrist keypoint moved by half the index-to-pinky MCP spread toward either side,
-/// and the palm center modeled as the midpoint of the wrist and the middle MCP. The palm
-/// markers are approximations; [`FINGER_JOINTS`] selects the 11 finger joints that follow the
-/// marker definition exactly up to the model's joint placement.
-pub const NYU_FROM_KEYPOINTS: [NyuJointSource; NYU_JOINTS] = {
-    use NyuJointSource::{Chain, Mid, Offset};
+/// NYU's 14 joints are 14 of its 36 markers (indices 0, 3, 6, 9, 12, 15, 18, 21, 24, 25, 27,
+/// 30, 31, 32). honline's `GroundTruthLoader` reproduces them on the sphere-mesh: per finger 5
+/// markers along the chain from the finger base to the tip end, at arc fractions 1, 19/24,
+/// 14/24, 9/24, 1/6 (tip first), then the base; the palm markers 30 "palm right", 31 "palm
+/// left" (sphere center + radius·(0, −1, 0.5) in the palm frame) and 32 "palm middle" (+
+/// radius·(0, 0, 0.5)). Here the finger chains are the DESIGN.md keypoints MCP→PIP→DIP→tip
+/// (thumb CMC→MCP→IP→tip; honline starts the finger chains at the membrane's projection on the
+/// first phalanx, a few mm distal of the MCP), and the palm markers use the template's spheres of
+/// the same names, with honline's offsets read in our model frame (the two model frames differ
+/// by the x mirror only, which leaves the offsets unchanged). NYU joint 11 lies on the pinky
+/// side and 12 on the thumb side (test frame 1), as `palm_right` (+x) and `palm_left` do on the
+/// right-hand template.
+pub const NYU_JOINT_SOURCES: [NyuJointSource; NYU_JOINTS] = {
+    use NyuJointSource::{Chain, Sphere};
     const PINKY: [usize; 4] = [17, 18, 19, 20];
     const RING: [usize; 4] = [13, 14, 15, 16];
     const MIDDLE: [usize; 4] = [9, 10, 11, 12];
@@ -339,56 +350,59 @@ pub const NYU_FROM_KEYPOINTS: [NyuJointSource; NYU_JOINTS] = {
             chain: THUMB,
             fraction: MID,
         },
-        Offset {
-            a: 0,
-            b: 17,
-            c: 5,
-            f: 0.5,
+        Sphere {
+            name: "palm_right",
+            offset: [0.0, -1.0, 0.5],
         },
-        Offset {
-            a: 0,
-            b: 5,
-            c: 17,
-            f: 0.5,
+        Sphere {
+            name: "palm_left",
+            offset: [0.0, -1.0, 0.5],
         },
-        Mid(0, 9),
+        Sphere {
+            name: "palm_middle",
+            offset: [0.0, 0.0, 0.5],
+        },
     ]
 };
 
-/// The NYU joints that are finger markers (all but the two wrist-side palm points and the palm
-/// center).
+/// The NYU joints that are finger markers (all but the three palm markers).
 pub const FINGER_JOINTS: [usize; 11] = [0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10];
 
-/// The 14 NYU joints of a fit's 21 keypoints ([`NYU_FROM_KEYPOINTS`]); `None` unless there are 21
-/// keypoints.
-pub fn nyu_joints_from_keypoints(keypoints: &[[f64; 3]]) -> Option<NyuJoints> {
-    if keypoints.len() != hand_model::keypoints::NUM_KEYPOINTS {
-        return None;
+/// The point at `fraction` of the arc length of the polyline `points`.
+fn along(points: &[Vector3<f64>], fraction: f64) -> Vector3<f64> {
+    let seg: Vec<f64> = points.windows(2).map(|w| (w[1] - w[0]).norm()).collect();
+    let mut left = fraction * seg.iter().sum::<f64>();
+    for (i, &len) in seg.iter().enumerate() {
+        if left <= len && len > 0.0 {
+            return points[i] + (points[i + 1] - points[i]) * (left / len);
+        }
+        left -= len;
     }
-    let k = |i: usize| Vector3::from(keypoints[i]);
-    Some(NYU_FROM_KEYPOINTS.map(|src| {
+    points[points.len() - 1]
+}
+
+/// The 14 NYU joints of `template` posed at `pose` ([`NYU_JOINT_SOURCES`]); `None` when the
+/// template lacks a named palm sphere or a sphere is not attached to a bone.
+pub fn nyu_joints(template: &SphereMeshTemplate, pose: &Pose) -> Option<NyuJoints> {
+    let posed = PosedSphereMesh::new(template, pose);
+    let kp = posed.keypoints(template);
+    let mut out = [[0.0; 3]; NYU_JOINTS];
+    for (o, src) in out.iter_mut().zip(NYU_JOINT_SOURCES) {
         let p = match src {
-            NyuJointSource::Chain { chain, fraction } => {
-                let seg: Vec<f64> = chain
-                    .windows(2)
-                    .map(|w| (k(w[1]) - k(w[0])).norm())
-                    .collect();
-                let mut left = fraction * seg.iter().sum::<f64>();
-                let mut p = k(chain[3]);
-                for (i, &len) in seg.iter().enumerate() {
-                    if left <= len && len > 0.0 {
-                        p = k(chain[i]) + (k(chain[i + 1]) - k(chain[i])) * (left / len);
-                        break;
-                    }
-                    left -= len;
-                }
-                p
+            NyuJointSource::Chain { chain, fraction } => along(&chain.map(|i| kp[i]), fraction),
+            NyuJointSource::Sphere { name, offset } => {
+                let i = template.spheres.iter().position(|s| s.name == name)?;
+                let Attachment::Bone { bone, .. } = template.spheres[i].attachment else {
+                    return None;
+                };
+                let s = &posed.spheres[i];
+                let r = posed.skeleton.globals.get(bone)?.rotation;
+                s.center + r * Vector3::from(offset) * s.radius
             }
-            NyuJointSource::Offset { a, b, c, f } => k(a) + (k(b) - k(c)) * f,
-            NyuJointSource::Mid(a, b) => (k(a) + k(b)) * 0.5,
         };
-        [p.x, p.y, p.z]
-    }))
+        *o = [p.x, p.y, p.z];
+    }
+    Some(out)
 }
 
 #[cfg(test)]
@@ -396,22 +410,36 @@ mod tests {
     use super::*;
 
     #[test]
-    fn keypoint_mapping_by_hand() {
-        // A straight finger chain of segments 10, 10, 20 along x: fraction 0.375 of 40 = 15.
-        let mut kp = vec![[0.0; 3]; 21];
-        for (i, x) in [(5, 0.0), (6, 10.0), (7, 20.0), (8, 40.0)] {
-            kp[i] = [x, 0.0, 0.0];
-        }
-        kp[17] = [0.0, 8.0, 0.0];
-        kp[9] = [0.0, 0.0, 6.0];
-        let j = nyu_joints_from_keypoints(&kp).unwrap();
-        assert_eq!(j[6], [40.0, 0.0, 0.0]);
-        assert!((j[7][0] - 15.0).abs() < 1e-12);
-        // Wrist-side points: wrist (origin) ± half the index→pinky MCP spread.
-        assert_eq!(j[11], [0.0, 4.0, 0.0]);
-        assert_eq!(j[12], [0.0, -4.0, 0.0]);
-        assert_eq!(j[13], [0.0, 0.0, 3.0]);
-        assert!(nyu_joints_from_keypoints(&kp[..20]).is_none());
+    fn nyu_mapping_on_the_posed_template() {
+        use hand_model::spheremesh::default_right_hand;
+        // Arc-length interpolation: segments 10, 10, 20 along x, 0.375 of 40 = 15.
+        let line = [0.0, 10.0, 20.0, 40.0].map(|x| Vector3::new(x, 0.0, 0.0));
+        assert_eq!(along(&line, 0.375), Vector3::new(15.0, 0.0, 0.0));
+        assert_eq!(along(&line, 1.0), line[3]);
+        // A translated rest pose: tips are the tip keypoints, the palm markers are the named
+        // spheres moved by honline's offsets in the (unrotated) palm frame.
+        let t = default_right_hand();
+        let sk = &t.skeleton;
+        let mut pose = Pose::zeros(sk);
+        pose.set(sk, "global_tz", 500.0).unwrap();
+        let j = nyu_joints(&t, &pose).unwrap();
+        let posed = PosedSphereMesh::new(&t, &pose);
+        let kp = posed.keypoints(&t);
+        assert_eq!(j[6], [kp[8].x, kp[8].y, kp[8].z]);
+        let i = t
+            .spheres
+            .iter()
+            .position(|s| s.name == "palm_right")
+            .unwrap();
+        let (c, r) = (posed.spheres[i].center, posed.spheres[i].radius);
+        let expected = c + Vector3::new(0.0, -r, 0.5 * r);
+        assert!((Vector3::from(j[11]) - expected).norm() < 1e-9);
+        // The pinky-side marker is on the pinky side (+x on the right hand).
+        assert!(j[11][0] > j[12][0]);
+        // A template without the palm spheres cannot be mapped.
+        let mut bare = t.clone();
+        bare.spheres.iter_mut().for_each(|s| s.name.push('_'));
+        assert!(nyu_joints(&bare, &pose).is_none());
     }
 
     #[test]

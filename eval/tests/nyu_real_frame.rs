@@ -2,7 +2,7 @@
 //! (`../shared/reference/nyu/depth_1_0000001.png`) from a rough initialization that uses no
 //! ground truth (segmented-cloud centroid, fixed upright orientation), then scored against the
 //! frame's 14 ground-truth joints through the documented keypoint mapping
-//! (`eval::real_frame::NYU_FROM_KEYPOINTS`). Handedness is chosen by fit: the default right hand
+//! (`eval::real_frame::NYU_JOINT_SOURCES`). Handedness is chosen by fit: the default right hand
 //! and its mirror image are both fitted and the lower energy is kept. No threshold yet: the test prints the number and
 //! only checks that it is finite and the fit lowered its energy. Skips (and says so) when the
 //! reference folder is absent.
@@ -11,7 +11,7 @@ use datasets::nyu::{depth_path, read_depth, read_xyz_labels, NYU_JOINT_NAMES};
 use datasets::reference::reference_path;
 use eval::depth_metrics::{depth_metrics, render_sphere_mesh, DepthMetricsScratch};
 use eval::markers::frame_error;
-use eval::real_frame::{fit_depth_frame, nyu_joints_from_keypoints, FitConfig, FINGER_JOINTS};
+use eval::real_frame::{fit_depth_frame, nyu_joints, FitConfig, FINGER_JOINTS};
 use hand_model::spheremesh::default_right_hand;
 use sensor_io::Camera;
 
@@ -36,7 +36,7 @@ fn nyu_frame_1_fit_error() {
     } else {
         fit_right
     };
-    let joints = nyu_joints_from_keypoints(&fit.keypoints).unwrap();
+    let joints = nyu_joints(&fit.template, &fit.pose).unwrap();
     let all = frame_error(&joints, &truth).unwrap();
     let pick = |v: &[[f64; 3]]| FINGER_JOINTS.map(|j| v[j]);
     let fingers = frame_error(&pick(&joints), &pick(&truth)).unwrap();
