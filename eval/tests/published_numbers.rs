@@ -5,7 +5,8 @@
 //!   12.24 mm (their papers), plus the fraction-of-frames-under-ε curves of every prediction file
 //!   as an SVG in the cargo target tmp dir;
 //! - Dexter-1: htrack's mean fingertip error 9.04 mm and median 7.60 mm over 2919 annotated
-//!   frames (`dexter1/htrack_errors_all.txt`, Tagliasacchi et al. 2015).
+//!   frames (`dexter1/htrack_errors_all.txt`, Tagliasacchi et al. 2015), and the curves of htrack
+//!   with and without re-initialization as an SVG.
 
 use eval::benchmarks::{dexter_score, nyu_file_errors};
 use eval::markers::MarkerSummary;
@@ -81,6 +82,19 @@ fn dexter_htrack_published_fingertip_error() {
         "Dexter-1 htrack with re-initialization: {} frames, mean {:.3} mm, median {:.3} mm",
         r.frames, r.mean, r.median_tip
     );
+    let curves: Vec<(String, Vec<f64>)> = [("htrack", &s), ("htrack with re-initialization", &r)]
+        .iter()
+        .map(|(n, sc)| {
+            (
+                n.to_string(),
+                sc.frame_errors.iter().map(|e| e.mean).collect(),
+            )
+        })
+        .collect();
+    let svg = under_curve_svg("Dexter-1: mean fingertip error", &curves, 50.0, 100).unwrap();
+    let out = std::path::Path::new(env!("CARGO_TARGET_TMPDIR")).join("dexter_under_curves.svg");
+    std::fs::write(&out, svg).unwrap();
+    println!("wrote {}", out.display());
     let e = dexter_score(&dir, "no-such-method", &DEXTER_SEQUENCES).unwrap_err();
     assert!(e.to_string().contains("no-such-method"), "{e}");
 }
