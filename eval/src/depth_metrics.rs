@@ -16,6 +16,26 @@
 //! hmodel's robust weighting `3.5/√(d + 10⁻³)` of E3D and the `Σ(|dx| + |dy|)/(2N)` form of E2D.
 //! The rendered model's background is depth 0 or any depth ≥ [`ModelDepth::FAR_MM`] (external
 //! renderings use 5000, the original ray tracers 32767).
+//!
+//! # Example
+//! ```
+//! use eval::depth_metrics::{depth_metrics, silhouette, DepthMetricsScratch, ModelDepth};
+//! use sensor_io::{Camera, DepthImage};
+//!
+//! let cam = Camera::sr300_qvga();
+//! let mut sensor = DepthImage::zeros(cam.width, cam.height);
+//! for v in 100..140 {
+//!     for u in 140..180 {
+//!         sensor.data[(v * cam.width + u) as usize] = 400;
+//!     }
+//! }
+//! // A model rendered exactly where the sensor saw the hand scores zero on both metrics.
+//! let model = ModelDepth::from_image(&sensor);
+//! let mut scratch = DepthMetricsScratch::default();
+//! let m = depth_metrics(&sensor, &silhouette(&sensor), &model, &cam, &mut scratch).unwrap();
+//! assert_eq!(m.d2m.unwrap().mean, 0.0);
+//! assert_eq!(m.m2d.unwrap().mean, 0.0);
+//! ```
 
 use hand_model::kinematics::Pose;
 use hand_model::render::{render_depth, DepthRender};
