@@ -68,6 +68,7 @@ fn nyu_frame_1_fit_error() {
     let f = &fit.frame;
     let cam = f.camera.clone().unwrap();
     let model = render_sphere_mesh(&fit.template, &fit.pose, &cam).unwrap();
+    let t0 = std::time::Instant::now();
     let m = depth_metrics(
         &f.depth,
         &f.hand.mask,
@@ -76,17 +77,19 @@ fn nyu_frame_1_fit_error() {
         &mut DepthMetricsScratch::default(),
     )
     .unwrap();
+    let metrics_ms = t0.elapsed().as_secs_f64() * 1e3;
     let (d2m, m2d) = (m.d2m.unwrap(), m.m2d.unwrap());
     println!(
         "NYU frame 1 fit: E_d2m {:.2} mm over {} sensor points, E_m2d {:.2} px over {} of {} \
-         rendered px outside the silhouette ({}×{})",
+         rendered px outside the silhouette ({}×{}; {:.2} ms)",
         d2m.mean,
         d2m.sensor_points,
         m2d.mean,
         m2d.outside_pixels,
         m2d.model_pixels,
         cam.width,
-        cam.height
+        cam.height,
+        metrics_ms
     );
     assert!(all.mean.is_finite() && fit.energy <= fit.initial_energy);
     assert!(d2m.mean.is_finite() && m2d.mean.is_finite());
