@@ -367,6 +367,19 @@ mod tests {
         Camera::new("test", w, h, 100.0, 100.0, w as f64 / 2.0, h as f64 / 2.0).unwrap()
     }
 
+    /// Both metrics of `model` against `sensor` segmented by its own silhouette.
+    fn score(sensor: &DepthImage, model: &ModelDepth, cam: &Camera) -> DepthMetrics {
+        let mask = silhouette(sensor);
+        depth_metrics(
+            sensor,
+            &mask,
+            model,
+            cam,
+            &mut DepthMetricsScratch::default(),
+        )
+        .unwrap()
+    }
+
     /// A depth image whose pixels inside `[u0, u1) × [v0, v1)` are at `z`.
     fn rect(w: u32, h: u32, [u0, u1, v0, v1]: [u32; 4], z: u16) -> DepthImage {
         let mut d = DepthImage::zeros(w, h);
@@ -383,14 +396,7 @@ mod tests {
         let cam = camera(40, 30);
         let sensor = rect(40, 30, [5, 30, 4, 25], 400);
         let model = ModelDepth::from_image(&sensor);
-        let m = depth_metrics(
-            &sensor,
-            &silhouette(&sensor),
-            &model,
-            &cam,
-            &mut DepthMetricsScratch::default(),
-        )
-        .unwrap();
+        let m = score(&sensor, &model, &cam);
         let (d2m, m2d) = (m.d2m.unwrap(), m.m2d.unwrap());
         assert_eq!(
             (d2m.mean, d2m.max, d2m.hmodel_weighted_mean),
@@ -462,14 +468,7 @@ mod tests {
             model.depth.iter().map(|&z| z.round() as u16).collect(),
         )
         .unwrap();
-        let m = depth_metrics(
-            &sensor,
-            &silhouette(&sensor),
-            &model,
-            &cam,
-            &mut DepthMetricsScratch::default(),
-        )
-        .unwrap();
+        let m = score(&sensor, &model, &cam);
         let d2m = m.d2m.unwrap();
         assert!(d2m.max <= 0.5 * 1.25 && d2m.mean < 0.3, "{d2m:?}");
         assert_eq!(d2m.sensor_points, hits);
@@ -560,14 +559,7 @@ mod tests {
         model.data[1] = 32767;
         let md = ModelDepth::from_image(&model);
         assert_eq!(md.rendered_count(), 36);
-        let m = depth_metrics(
-            &sensor,
-            &silhouette(&sensor),
-            &md,
-            &cam,
-            &mut DepthMetricsScratch::default(),
-        )
-        .unwrap();
+        let m = score(&sensor, &md, &cam);
         assert_eq!(m.d2m.unwrap().mean, 0.0);
         assert_eq!(m.m2d.unwrap().outside_pixels, 0);
     }
