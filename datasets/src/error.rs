@@ -56,6 +56,9 @@ pub enum DatasetError {
         #[source]
         source: std::io::Error,
     },
+    /// An image or camera of `sensor-io` could not be read (PNG files of a sequence).
+    #[error(transparent)]
+    Sensor(#[from] sensor_io::SensorError),
     /// An error of the hand model (template, shape vector).
     #[error(transparent)]
     Model(#[from] ModelError),

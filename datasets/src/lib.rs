@@ -16,17 +16,31 @@
 //! - [`scans`]: OBJ photogrammetry scans and the original authors' fitted sphere-meshes, the
 //!   real data of offline multi-frame calibration (issue 6, thesis §3.4).
 //!
-//! Still to come (issue 7): readers for the Handy/teaser layout, NYU and Dexter-1.
+//!
+//! Dataset readers (issue 7), each refusing truncated or corrupt files with the file and line
+//! named:
+//! - [`handy`]: the Handy/teaser sequence layout (`depth-%07d.png`, `color-%07d.png`,
+//!   `marker_positions.txt`);
+//! - [`nyu`]: NYU depth PNGs (`(G << 8) | B`) and 14-joint uvd labels → camera-frame mm;
+//! - [`dexter`]: Dexter-1 Pos3D fingertip ground truth, ToF depth frames and htrack's 24-joint
+//!   outputs;
+//! - [`text`]: the numeric text parsing they share; [`reference`](mod@reference): where tests find
+//!   `shared/reference`.
 
 pub mod animbank;
+pub mod dexter;
 pub mod error;
+pub mod handy;
 pub mod motion;
 pub mod noise;
+pub mod nyu;
 pub mod prior;
+pub mod reference;
 pub mod scans;
 pub mod sheet;
 pub mod subjects;
 pub mod synth;
+pub mod text;
 
 pub use error::{DatasetError, Result};
 pub use motion::{Motion, MotionLibrary};

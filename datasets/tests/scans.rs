@@ -7,6 +7,7 @@
 
 use std::path::{Path, PathBuf};
 
+use datasets::reference::reference_path;
 use datasets::scans::{
     locate_fits, match_sphere_names, parse_obj_points, principal_extents, read_obj_points,
     scale_from_extents, sphere_principal_extents, FittedReference,
@@ -17,26 +18,16 @@ use hand_model::shape::{Element, Sphere};
 use hand_model::spheremesh::{default_right_hand, import_hmodel_dir};
 use nalgebra::Vector3;
 
-const ROOT: &str = concat!(
-    env!("CARGO_MANIFEST_DIR"),
-    "/../../shared/reference/hand-scans-tkach"
-);
-const HMODEL: &str = concat!(
-    env!("CARGO_MANIFEST_DIR"),
-    "/../../shared/reference/hmodel-template-anastasia"
-);
 /// Threshold of the "near the surface" fraction (mm).
 const NEAR_MM: f64 = 2.0;
 
-/// The reference folder, or `None` (with the skip printed) when it is absent.
+/// The scans' reference folder, or `None` (with the skip printed) when it is absent.
 fn reference_dir(what: &str) -> Option<PathBuf> {
-    let p = Path::new(ROOT);
-    if p.exists() {
-        Some(p.to_path_buf())
-    } else {
-        println!("skipped {what}: {ROOT} absent");
-        None
+    let dir = reference_path("hand-scans-tkach");
+    if dir.is_none() {
+        println!("skipped {what}");
     }
+    dir
 }
 
 fn load_scans(dir: &Path) -> Vec<Vec<Vector3<f64>>> {
@@ -116,12 +107,12 @@ fn fitted_reference_names_follow_the_phalanges() {
     assert_eq!(names, [["thumb_base", "thumb_bottom", "thumb_fold"]]);
 
     // The order is the hmodel C++ template's (the project importer's names for it).
-    if Path::new(HMODEL).exists() {
-        let t = import_hmodel_dir(HMODEL).unwrap();
+    if let Some(hmodel) = reference_path("hmodel-template-anastasia") {
+        let t = import_hmodel_dir(&hmodel).unwrap();
         let hmodel: Vec<&str> = t.spheres.iter().map(|s| s.name.as_str()).collect();
         assert_eq!(hmodel, r.sphere_names);
     } else {
-        println!("skipped the hmodel name order: {HMODEL} absent");
+        println!("skipped the hmodel name order");
     }
 
     let m = match_sphere_names(&r.sphere_names, &default_right_hand());

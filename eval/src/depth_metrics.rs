@@ -16,8 +16,30 @@
 //! hmodel's robust weighting `3.5/√(d + 10⁻³)` of E3D and the `Σ(|dx| + |dy|)/(2N)` form of E2D.
 //! The rendered model's background is depth 0 or any depth ≥ [`ModelDepth::FAR_MM`] (external
 //! renderings use 5000, the original ray tracers 32767).
+//!
+//! # Example
+//! ```
+//! use eval::depth_metrics::{depth_metrics, silhouette, DepthMetricsScratch, ModelDepth};
+//! use sensor_io::{Camera, DepthImage};
+//!
+//! let cam = Camera::sr300_qvga();
+//! let mut sensor = DepthImage::zeros(cam.width, cam.height);
+//! for v in 100..140 {
+//!     for u in 140..180 {
+//!         sensor.data[(v * cam.width + u) as usize] = 400;
+//!     }
+//! }
+//! // A model rendered exactly where the sensor saw the hand scores zero on both metrics.
+//! let model = ModelDepth::from_image(&sensor);
+//! let mut scratch = DepthMetricsScratch::default();
+//! let m = depth_metrics(&sensor, &silhouette(&sensor), &model, &cam, &mut scratch).unwrap();
+//! assert_eq!(m.d2m.unwrap().mean, 0.0);
+//! assert_eq!(m.m2d.unwrap().mean, 0.0);
+//! ```
 
-use hand_model::render::DepthRender;
+use hand_model::kinematics::Pose;
+use hand_model::render::{render_depth, DepthRender};
+use hand_model::spheremesh::{PosedSphereMesh, SphereMeshTemplate};
 use kiddo::{ImmutableKdTree, SquaredEuclidean};
 use sensor_io::dt::DistanceTransform;
 use sensor_io::{Camera, DepthImage, Mask};
@@ -307,6 +329,24 @@ pub fn depth_metrics(
     })
 }
 
+/// A posed sphere-mesh template rendered from `camera` by the CPU ray caster (§3.3.2): the model
+/// depth the metrics compare with the sensor. Refused: a camera the renderer rejects.
+pub fn render_sphere_mesh(
+    template: &SphereMeshTemplate,
+    pose: &Pose,
+    camera: &Camera,
+) -> Result<ModelDepth> {
+    let posed = PosedSphereMesh::new(template, pose);
+    let elements: Vec<_> = template.elements.iter().map(|e| e.element).collect();
+    let render = render_depth(
+        &hmodel_spheremesh::intrinsics(camera),
+        &posed.spheres,
+        &elements,
+    )
+    .map_err(|e| EvalError::arg("camera", e.to_string()))?;
+    ModelDepth::from_render(&render)
+}
+
 /// The silhouette of a depth image: every pixel with a depth (a sensor frame already segmented
 /// to the hand, or a rendering).
 pub fn silhouette(depth: &DepthImage) -> Mask {
@@ -327,6 +367,19 @@ mod tests {
         Camera::new("test", w, h, 100.0, 100.0, w as f64 / 2.0, h as f64 / 2.0).unwrap()
     }
 
+    /// Both metrics of `model` against `sensor` segmented by its own silhouette.
+    fn score(sensor: &DepthImage, model: &ModelDepth, cam: &Camera) -> DepthMetrics {
+        let mask = silhouette(sensor);
+        depth_metrics(
+            sensor,
+            &mask,
+            model,
+            cam,
+            &mut DepthMetricsScratch::default(),
+        )
+        .unwrap()
+    }
+
     /// A depth image whose pixels inside `[u0, u1) × [v0, v1)` are at `z`.
     fn rect(w: u32, h: u32, [u0, u1, v0, v1]: [u32; 4], z: u16) -> DepthImage {
         let mut d = DepthImage::zeros(w, h);
@@ -343,14 +396,7 @@ mod tests {
         let cam = camera(40, 30);
         let sensor = rect(40, 30, [5, 30, 4, 25], 400);
         let model = ModelDepth::from_image(&sensor);
-        let m = depth_metrics(
-            &sensor,
-            &silhouette(&sensor),
-            &model,
-            &cam,
-            &mut DepthMetricsScratch::default(),
-        )
-        .unwrap();
+        let m = score(&sensor, &model, &cam);
         let (d2m, m2d) = (m.d2m.unwrap(), m.m2d.unwrap());
         assert_eq!(
             (d2m.mean, d2m.max, d2m.hmodel_weighted_mean),
@@ -402,9 +448,7 @@ mod tests {
         // sensor point is within 0.5 mm of depth (the rounding), i.e. 0.5·‖(a, b, 1)‖ mm along
         // its ray, of its own rendered point (‖(a, b, 1)‖ < 1.25 over this image), the mean is
         // about a quarter millimetre, and the silhouettes coincide.
-        use hand_model::kinematics::Pose;
-        use hand_model::render::{render_depth, Intrinsics};
-        use hand_model::spheremesh::{default_right_hand, PosedSphereMesh};
+        use hand_model::spheremesh::default_right_hand;
         let t = default_right_hand();
         let mut pose = Pose::zeros(&t.skeleton);
         for (name, v) in [
@@ -414,31 +458,20 @@ mod tests {
         ] {
             pose.set(&t.skeleton, name, v).unwrap();
         }
-        let posed = PosedSphereMesh::new(&t, &pose);
-        let elements: Vec<_> = t.elements.iter().map(|e| e.element).collect();
         let cam = Camera::sr300_qvga();
-        let intr = Intrinsics {
-            fx: cam.fx,
-            fy: cam.fy,
-            cx: cam.cx,
-            cy: cam.cy,
-            width: cam.width,
-            height: cam.height,
-        };
-        let render = render_depth(&intr, &posed.spheres, &elements).unwrap();
-        assert!(render.hit_count() > 1000);
-        let sensor = DepthImage::from_data(cam.width, cam.height, render.depth_u16()).unwrap();
-        let m = depth_metrics(
-            &sensor,
-            &silhouette(&sensor),
-            &ModelDepth::from_render(&render).unwrap(),
-            &cam,
-            &mut DepthMetricsScratch::default(),
+        let model = render_sphere_mesh(&t, &pose, &cam).unwrap();
+        let hits = model.rendered_count();
+        assert!(hits > 1000);
+        let sensor = DepthImage::from_data(
+            cam.width,
+            cam.height,
+            model.depth.iter().map(|&z| z.round() as u16).collect(),
         )
         .unwrap();
+        let m = score(&sensor, &model, &cam);
         let d2m = m.d2m.unwrap();
         assert!(d2m.max <= 0.5 * 1.25 && d2m.mean < 0.3, "{d2m:?}");
-        assert_eq!(d2m.sensor_points, render.hit_count());
+        assert_eq!(d2m.sensor_points, hits);
         assert_eq!(m.m2d.unwrap().outside_pixels, 0);
     }
 
@@ -526,14 +559,7 @@ mod tests {
         model.data[1] = 32767;
         let md = ModelDepth::from_image(&model);
         assert_eq!(md.rendered_count(), 36);
-        let m = depth_metrics(
-            &sensor,
-            &silhouette(&sensor),
-            &md,
-            &cam,
-            &mut DepthMetricsScratch::default(),
-        )
-        .unwrap();
+        let m = score(&sensor, &md, &cam);
         assert_eq!(m.d2m.unwrap().mean, 0.0);
         assert_eq!(m.m2d.unwrap().outside_pixels, 0);
     }

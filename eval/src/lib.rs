@@ -7,15 +7,21 @@
 //!   (DESIGN.md "Metrics");
 //! - [`shape_error`]: E_β (Eq. 4.16), the mean absolute shape-parameter error over a subset;
 //! - [`traces`]: per-term energy traces and timing summaries of tracker records;
-//! - [`plot`]: SVG line plots for reports;
+//! - [`benchmarks`]: published numbers recomputed from published outputs (NYU mean 3D joint
+//!   error, Dexter-1 fingertip error);
+//! - [`real_frame`]: the sphere-mesh model fitted to one real depth frame without ground truth,
+//!   and the documented mapping of its keypoints to NYU's 14 joints;
+//! - [`plot`]: SVG line plots for reports, including the papers' "% frames with error < ε";
 //! - [`synthetic`]: scoring any tracker on a synthetic sequence with exact ground truth.
 //!
 //! Still to come (issue 7): `hands eval|compare|demo`.
 
+pub mod benchmarks;
 pub mod depth_metrics;
 pub mod error;
 pub mod markers;
 pub mod plot;
+pub mod real_frame;
 pub mod shape_error;
 pub mod synthetic;
 pub mod traces;

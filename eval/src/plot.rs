@@ -168,6 +168,42 @@ pub fn bar_plot_svg(
     Ok(svg)
 }
 
+/// The papers' "% of frames with error < ε" plot (thesis Fig. 3.14, 4.8): for each named list of
+/// per-frame errors (mm), the fraction of its frames under ε for ε in `[0, max_epsilon]` (`steps`
+/// + 1 samples), in percent.
+pub fn under_curve_svg(
+    title: &str,
+    errors: &[(String, Vec<f64>)],
+    max_epsilon: f64,
+    steps: usize,
+) -> anyhow::Result<String> {
+    anyhow::ensure!(
+        max_epsilon.is_finite() && max_epsilon > 0.0 && steps > 0,
+        "ε range must be positive with at least one step"
+    );
+    let eps: Vec<f64> = (0..=steps)
+        .map(|i| max_epsilon * i as f64 / steps as f64)
+        .collect();
+    let series: Vec<Series> = errors
+        .iter()
+        .map(|(label, values)| Series {
+            label: label.clone(),
+            points: eps
+                .iter()
+                .zip(crate::markers::under_curve(values, &eps))
+                .map(|(&e, f)| (e, 100.0 * f))
+                .collect(),
+        })
+        .collect();
+    line_plot_svg(
+        title,
+        "ε (mm)",
+        "% frames with error < ε",
+        &series,
+        Some(100.0),
+    )
+}
+
 fn plot_err<E: std::fmt::Display>(e: E) -> anyhow::Error {
     anyhow::anyhow!("plot: {e}")
 }
@@ -192,6 +228,12 @@ mod tests {
         assert!(svg.starts_with("<svg") && svg.contains("front-facing"));
         assert!(svg.contains("closest point") && !svg.contains("NaN"));
         let empty = line_plot_svg("empty", "x", "y", &[], None).unwrap();
+        let curves = under_curve_svg("nyu", &[("a".into(), vec![1.0, 30.0])], 50.0, 50).unwrap();
+        assert!(
+            curves.contains("frames with error") && curves.contains("nyu"),
+            "{curves}"
+        );
+        assert!(under_curve_svg("bad", &[], f64::NAN, 10).is_err());
         assert!(empty.contains("</svg>"));
     }
 

@@ -10,8 +10,9 @@ use datasets::scans::{
     match_sphere_names, principal_extents, read_obj_points, scale_from_extents,
     sphere_principal_extents, FittedReference,
 };
+use eval::real_frame::{best_energy, place_pose};
 use hand_model::kinematics::Pose;
-use hand_model::math::{fit_similarity, matrix_to_euler_xyz};
+use hand_model::math::fit_similarity;
 use hand_model::query::SphereMeshGeometry;
 use hand_model::spheremesh::{default_right_hand, PosedSphereMesh, SphereMeshTemplate};
 use hmodel_spheremesh::calibration::{calibrate, CalibrationConfig, CalibrationFrame};
@@ -42,7 +43,7 @@ fn initial_pose(base: &SphereMeshTemplate, frame: &CalibrationFrame) -> (Pose, f
     let sk = &base.skeleton;
     let rest = PosedSphereMesh::new(base, &Pose::zeros(sk));
     let centers: Vec<Vector3<f64>> = rest.spheres.iter().map(|s| s.center).collect();
-    let (ct, at) = frame_of(&centers);
+    let (_, at) = frame_of(&centers);
     let (cs, as_) = frame_of(&frame.points);
     let config = CalibrationConfig {
         fit_shape: false,
@@ -69,25 +70,9 @@ fn initial_pose(base: &SphereMeshTemplate, frame: &CalibrationFrame) -> (Pose, f
                 }
             }
             p.clamp_to_limits(sk);
-            let [a, b, c] = matrix_to_euler_xyz(&r);
-            let t = cs - r * ct;
-            for (name, v) in [
-                ("global_rx", a),
-                ("global_ry", b),
-                ("global_rz", c),
-                ("global_tx", t.x),
-                ("global_ty", t.y),
-                ("global_tz", t.z),
-            ] {
-                p.set(sk, name, v).unwrap();
-            }
+            place_pose(base, &mut p, &r, &cs);
             let fit = calibrate(base, std::slice::from_ref(frame), &[p], &config).unwrap();
-            let e = fit
-                .iterations
-                .iter()
-                .filter(|r| r.accepted)
-                .map(|r| r.energy)
-                .fold(fit.initial_energy, f64::min);
+            let e = best_energy(&fit);
             if best.as_ref().is_none_or(|(_, b)| e < *b) {
                 best = Some((fit.poses[0].clone(), e));
             }
