@@ -2,6 +2,8 @@
 //! and its query geometry, the sensor points with their monocular front-facing correspondences
 //! (thesis §3.3.1, Fig. 3.9) and IRLS weights, and the model→data push constraints of Eq. 3.5.
 
+use std::borrow::Cow;
+
 use hand_model::kinematics::{Pose, PosedSkeleton, Skeleton};
 use hand_model::query::{Projection, SphereMeshGeometry, View, NO_SEED};
 use hand_model::render::{DepthRenderer, Intrinsics, PixelHit};
@@ -50,7 +52,9 @@ pub struct SilhouettePush {
 /// the current number of points.
 #[derive(Clone, Debug)]
 pub struct TrackingCtx<'m> {
-    template: &'m SphereMeshTemplate,
+    /// Borrowed from the tracker, or owned after [`TrackingCtx::set_template`] (online
+    /// calibration reshapes the model between iterations).
+    template: Cow<'m, SphereMeshTemplate>,
     elements: Vec<Element>,
     jacobian: FootpointJacobian,
     /// Per sphere, an element that holds it (for the Jacobian of a sphere center).
@@ -119,7 +123,7 @@ impl<'m> TrackingCtx<'m> {
             }
         }
         Ok(Self {
-            template,
+            template: Cow::Borrowed(template),
             jacobian: FootpointJacobian::new(template)?,
             elements,
             sphere_element,
@@ -236,7 +240,7 @@ impl<'m> TrackingCtx<'m> {
             self.correspondences.fill(None);
             return Ok(());
         }
-        self.posed.update(self.template, &self.pose);
+        self.posed.update(&self.template, &self.pose);
         if self.geometry.update(&self.posed.spheres).is_err() {
             self.correspondences.fill(None);
             return Err(TermError::Failed("posed spheres are not finite"));
@@ -350,9 +354,34 @@ impl<'m> TrackingCtx<'m> {
         Ok(())
     }
 
-    /// The template.
-    pub fn template(&self) -> &'m SphereMeshTemplate {
-        self.template
+    /// The template (as last set).
+    pub fn template(&self) -> &SphereMeshTemplate {
+        &self.template
+    }
+
+    /// Replace the template by a reshaped one of the same topology (same spheres, attachments,
+    /// elements and skeleton DOFs; e.g. the template at another honline β, thesis §4.3): the
+    /// element Jacobians only depend on the topology, so they are kept. The model is re-posed at
+    /// the next [`TrackingCtx::update`]. An error when the topology differs.
+    pub fn set_template(&mut self, template: SphereMeshTemplate) -> Result<(), ModelError> {
+        let old = &*self.template;
+        let same = template.spheres.len() == old.spheres.len()
+            && template.elements.len() == old.elements.len()
+            && template.skeleton.num_dofs() == old.skeleton.num_dofs()
+            && template.skeleton.bones().len() == old.skeleton.bones().len()
+            && template
+                .elements
+                .iter()
+                .zip(&old.elements)
+                .all(|(a, b)| a.element.spheres() == b.element.spheres());
+        if !same {
+            return Err(ModelError::InvalidArgument {
+                name: "template",
+                reason: "the new template has another topology".into(),
+            });
+        }
+        self.template = Cow::Owned(template);
+        Ok(())
     }
 
     /// The posed template at the last update.
@@ -420,6 +449,7 @@ impl PoseContext for TrackingCtx<'_> {
     fn skeleton(&self) -> &Skeleton {
         &self.template.skeleton
     }
+
     fn pose(&self) -> &Pose {
         &self.pose
     }

@@ -195,6 +195,8 @@ impl Terms {
 
 /// The solve of one frame, as [`FrameLoop`] drives it.
 struct Problem<'m> {
+    /// The template the context borrows (its skeleton drives the pose retraction).
+    template: &'m SphereMeshTemplate,
     ctx: TrackingCtx<'m>,
     solver: LmSolver,
     ws: LmWorkspace,
@@ -206,7 +208,7 @@ struct Problem<'m> {
 impl TrackingProblem for Problem<'_> {
     fn solve(&mut self, pose: &mut Pose) -> bool {
         let (list, n) = self.terms.list();
-        let sk = &self.ctx.template().skeleton;
+        let sk = &self.template.skeleton;
         timed_solve(
             &self.solver,
             &mut self.ws,
@@ -315,6 +317,7 @@ impl<'m> Tracker<'m> {
             frames: FrameLoop::new(mean_pose.clone(), config.loss.clone()),
             posed: PosedSphereMesh::new(template, &mean_pose),
             problem: Problem {
+                template,
                 ctx,
                 solver,
                 ws,
