@@ -105,6 +105,25 @@ impl<'m> TrackingCtx<'m> {
         view: View,
         irls: IrlsParams,
     ) -> Result<Self, ModelError> {
+        Self::with_template(Cow::Borrowed(template), view, irls)
+    }
+
+    /// As [`TrackingCtx::new`], owning its template (for a context that outlives the template it
+    /// was built from, e.g. one reshaped by [`TrackingCtx::set_template`]).
+    pub fn owned(
+        template: SphereMeshTemplate,
+        view: View,
+        irls: IrlsParams,
+    ) -> Result<TrackingCtx<'static>, ModelError> {
+        TrackingCtx::with_template(Cow::Owned(template), view, irls)
+    }
+
+    fn with_template(
+        cow: Cow<'m, SphereMeshTemplate>,
+        view: View,
+        irls: IrlsParams,
+    ) -> Result<Self, ModelError> {
+        let template: &SphereMeshTemplate = &cow;
         let pose = Pose::zeros(&template.skeleton);
         let posed = PosedSphereMesh::new(template, &pose);
         let elements: Vec<Element> = template.elements.iter().map(|e| e.element).collect();
@@ -122,9 +141,10 @@ impl<'m> TrackingCtx<'m> {
                 }
             }
         }
+        let jacobian = FootpointJacobian::new(template)?;
         Ok(Self {
-            template: Cow::Borrowed(template),
-            jacobian: FootpointJacobian::new(template)?,
+            template: cow,
+            jacobian,
             elements,
             sphere_element,
             pose,

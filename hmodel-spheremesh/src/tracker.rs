@@ -68,7 +68,8 @@ pub enum FrontFacingView {
 }
 
 impl FrontFacingView {
-    fn view(self) -> View {
+    /// The query view of this camera model.
+    pub fn view(self) -> View {
         match self {
             Self::Orthographic => View::Orthographic(Vector3::z()),
             Self::Perspective => View::Perspective {
