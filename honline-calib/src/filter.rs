@@ -50,7 +50,11 @@ impl std::fmt::Display for Estimator {
 /// the frame says about the shape once the pose is free. `theta` and `beta` index `h`. Pose
 /// directions no data row touches (hidden fingers) get a tiny ridge (they do not couple to β).
 /// The result is symmetric with a non-negative diagonal; `None` when `h` is not finite.
-pub fn marginal_information(h: &DMatrix<f64>, theta: &[usize], beta: &[usize]) -> Option<DMatrix<f64>> {
+pub fn marginal_information(
+    h: &DMatrix<f64>,
+    theta: &[usize],
+    beta: &[usize],
+) -> Option<DMatrix<f64>> {
     if !h.iter().all(|v| v.is_finite()) {
         return None;
     }
@@ -58,7 +62,10 @@ pub fn marginal_information(h: &DMatrix<f64>, theta: &[usize], beta: &[usize]) -
     let htt = DMatrix::from_fn(nt, nt, |i, j| h[(theta[i], theta[j])]);
     let htb = DMatrix::from_fn(nt, nb, |i, j| h[(theta[i], beta[j])]);
     let hbb = DMatrix::from_fn(nb, nb, |i, j| h[(beta[i], beta[j])]);
-    let scale = (0..nt).map(|i| htt[(i, i)].abs()).fold(0.0, f64::max).max(1.0);
+    let scale = (0..nt)
+        .map(|i| htt[(i, i)].abs())
+        .fold(0.0, f64::max)
+        .max(1.0);
     let mut reg = htt;
     for i in 0..nt {
         reg[(i, i)] += 1e-9 * scale;
@@ -122,9 +129,20 @@ impl ShapeBelief {
         true
     }
 
-    /// The certainty of each entry: the diagonal of the information matrix (per mm²).
+    /// The certainty of each entry: the diagonal of the information matrix (per mm²; the
+    /// certainty of an entry with all others known).
     pub fn certainty(&self) -> Vec<f64> {
         self.information.diagonal().iter().copied().collect()
+    }
+
+    /// The marginal certainty of each entry, `1 / diag(Σ̂)` (per mm²; Fig. 4.6's "inverse of
+    /// the diagonal entry of the covariance"): low for two phalanges of a straight finger even
+    /// when their sum is certain. Zeros when the information is singular.
+    pub fn marginal_certainty(&self) -> Vec<f64> {
+        match self.information.clone().cholesky() {
+            Some(c) => c.inverse().diagonal().iter().map(|v| 1.0 / v).collect(),
+            None => vec![0.0; self.mean.len()],
+        }
     }
 }
 

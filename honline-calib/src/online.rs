@@ -6,8 +6,8 @@ use std::time::Instant;
 use hand_model::kinematics::Pose;
 use hand_model::solver::terms::{JointLimits, PosePrior, Temporal};
 use hand_model::solver::{
-    sphere_mesh_points, EnergyTerm, IterInfo, LmCallback, LmError, LmSolver, LmWorkspace,
-    NoTerm, NormalEquations, PcaPrior, PriorSetup, TermError,
+    sphere_mesh_points, EnergyTerm, IterInfo, LmCallback, LmError, LmSolver, LmWorkspace, NoTerm,
+    NormalEquations, PcaPrior, PriorSetup, TermError,
 };
 use hand_model::spheremesh::{PosedSphereMesh, ShapeBasis, SphereMeshTemplate};
 use hand_model::ModelError;
@@ -64,8 +64,8 @@ impl Default for OnlineConfig {
             estimator: Estimator::Iekf,
             subset: ShapeSubset::Observable,
             tracker: TrackerConfig::default(),
-            shape_prior: 1.0,
-            radius_prior: 1.0,
+            shape_prior: 10.0,
+            radius_prior: 10.0,
             limits: 1e5,
             valid: 1e3,
             beta_damping: 10.0,
@@ -116,7 +116,12 @@ struct ShapeCallback<'a> {
 }
 
 impl LmCallback<OnlineCtx> for ShapeCallback<'_> {
-    fn prepare(&mut self, pose: &Pose, ctx: &mut OnlineCtx, info: IterInfo) -> Result<(), TermError> {
+    fn prepare(
+        &mut self,
+        pose: &Pose,
+        ctx: &mut OnlineCtx,
+        info: IterInfo,
+    ) -> Result<(), TermError> {
         if ctx.dirty {
             let t = self
                 .basis
@@ -153,7 +158,11 @@ impl LmCallback<OnlineCtx> for ShapeCallback<'_> {
             }
             self.next[i] = v;
         }
-        let latent = [ctx.latent[0] + dl[0], ctx.latent[1] + dl[1], ctx.latent[2] + dl[2]];
+        let latent = [
+            ctx.latent[0] + dl[0],
+            ctx.latent[1] + dl[1],
+            ctx.latent[2] + dl[2],
+        ];
         let finite = latent.iter().chain(&self.next).all(|v| v.is_finite());
         if finite && self.basis.apply(self.base, &self.next).is_ok() {
             std::mem::swap(&mut ctx.beta, &mut self.next);
@@ -338,7 +347,10 @@ impl OnlineCalibrator {
         let k = self.layout.active.len();
         let mut frame_info = DMatrix::zeros(k, k);
         let mut solved = false;
-        let finite_points = frame.points.iter().filter(|p| p.iter().all(|v| v.is_finite()));
+        let finite_points = frame
+            .points
+            .iter()
+            .filter(|p| p.iter().all(|v| v.is_finite()));
         if finite_points.count() >= self.config.min_points.max(1) {
             let t0 = Instant::now();
             self.ctx.tracking.set_frame(frame);

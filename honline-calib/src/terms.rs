@@ -73,7 +73,11 @@ impl<T: EnergyTerm<TrackingCtx<'static>>> EnergyTerm<OnlineCtx> for Lifted<T> {
     fn name(&self) -> &'static str {
         self.0.name()
     }
-    fn accumulate(&self, ctx: &OnlineCtx, ne: &mut NormalEquations) -> Result<TermStats, TermError> {
+    fn accumulate(
+        &self,
+        ctx: &OnlineCtx,
+        ne: &mut NormalEquations,
+    ) -> Result<TermStats, TermError> {
         self.0.accumulate(&ctx.tracking, ne)
     }
 }
@@ -108,7 +112,11 @@ impl EnergyTerm<OnlineCtx> for ShapeData {
     fn name(&self) -> &'static str {
         "data"
     }
-    fn accumulate(&self, ctx: &OnlineCtx, ne: &mut NormalEquations) -> Result<TermStats, TermError> {
+    fn accumulate(
+        &self,
+        ctx: &OnlineCtx,
+        ne: &mut NormalEquations,
+    ) -> Result<TermStats, TermError> {
         let layout = RowLayout {
             pose: 0,
             shape: &self.map,
@@ -183,7 +191,11 @@ impl EnergyTerm<OnlineCtx> for ShapePrior {
     fn name(&self) -> &'static str {
         "shape_prior"
     }
-    fn accumulate(&self, ctx: &OnlineCtx, ne: &mut NormalEquations) -> Result<TermStats, TermError> {
+    fn accumulate(
+        &self,
+        ctx: &OnlineCtx,
+        ne: &mut NormalEquations,
+    ) -> Result<TermStats, TermError> {
         let mut stats = TermStats::ZERO;
         for (k, (&i, &(bar, axis, limits, radius))) in
             self.layout.active.iter().zip(&self.entries).enumerate()
@@ -269,8 +281,10 @@ pub fn finger_order_constraints(basis: &ShapeBasis) -> Vec<Constraint> {
         }
     }
     for d in digits {
-        if let (Some(y), Some(l)) = (idx(&format!("{d}_base_y")), idx(&format!("{d}_bottom_length")))
-        {
+        if let (Some(y), Some(l)) = (
+            idx(&format!("{d}_base_y")),
+            idx(&format!("{d}_bottom_length")),
+        ) {
             out.push(Constraint {
                 name: format!("{d}_base_above_wrist"),
                 kappa: vec![(y, 1.0), (l, -0.5)],
@@ -325,7 +339,11 @@ impl EnergyTerm<OnlineCtx> for ShapeValidity {
     fn name(&self) -> &'static str {
         "shape_valid"
     }
-    fn accumulate(&self, ctx: &OnlineCtx, ne: &mut NormalEquations) -> Result<TermStats, TermError> {
+    fn accumulate(
+        &self,
+        ctx: &OnlineCtx,
+        ne: &mut NormalEquations,
+    ) -> Result<TermStats, TermError> {
         let mut stats = TermStats::ZERO;
         for (c, cols) in &self.rows {
             let v = c.value(&ctx.beta);
@@ -362,7 +380,11 @@ impl EnergyTerm<OnlineCtx> for IekfPrior {
     fn name(&self) -> &'static str {
         "iekf"
     }
-    fn accumulate(&self, ctx: &OnlineCtx, ne: &mut NormalEquations) -> Result<TermStats, TermError> {
+    fn accumulate(
+        &self,
+        ctx: &OnlineCtx,
+        ne: &mut NormalEquations,
+    ) -> Result<TermStats, TermError> {
         let Some((mean, info)) = &ctx.prior else {
             return Ok(TermStats::ZERO);
         };

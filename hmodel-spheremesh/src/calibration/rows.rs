@@ -73,7 +73,6 @@ impl Row {
     }
 }
 
-
 /// Where one frame's unknowns live in the system.
 #[derive(Copy, Clone, Debug)]
 pub struct RowLayout<'a> {
@@ -190,12 +189,14 @@ impl ShapeRows {
             .zip(ctx.weights())
         {
             let Some(c) = c else { continue };
-            let dofs = jacobian.columns(posed, c.element as usize, &c.spheres, &c.weights, &mut cols);
+            let dofs =
+                jacobian.columns(posed, c.element as usize, &c.spheres, &c.weights, &mut cols);
             for (&d, col) in dofs.iter().zip(&cols) {
                 self.row.add(theta + d, u.dot(col));
             }
             self.add_shape(&c.spheres, &c.weights, u, u.dot(&c.normal));
-            self.row.flush_data(ne, r, weights.d2m * wr, info_from, info);
+            self.row
+                .flush_data(ne, r, weights.d2m * wr, info_from, info);
             // The energy the steps are judged by: the Huber norm itself (its IRLS quadratic has
             // the same value and gradient at the linearization point).
             out.d2m += weights.d2m

@@ -351,8 +351,15 @@ impl Problem<'_> {
                 d2m: self.config.d2m,
                 m2d: self.config.m2d,
             };
-            let data =
-                rows.add_frame(&ctx, &self.space, &layout, &weights, &mut ne, &mut parts.info, so);
+            let data = rows.add_frame(
+                &ctx,
+                &self.space,
+                &layout,
+                &weights,
+                &mut ne,
+                &mut parts.info,
+                so,
+            );
             parts.d2m += data.d2m;
             parts.m2d += data.m2d;
             // m2d on a complete cloud (Eq. 3.12 with Π_D the closest data point): samples of
