@@ -439,6 +439,16 @@ impl<'m> TrackingCtx<'m> {
         &self.residuals
     }
 
+    /// The d2m rows of the points with a correspondence: `(q, u, r, w)` — footpoint, unit
+    /// residual direction, residual `−‖p − q‖` and IRLS weight (Eq. 3.4).
+    pub fn d2m_rows(&self) -> impl Iterator<Item = (&Projection, &Vector3<f64>, f64, f64)> + '_ {
+        self.correspondences
+            .iter()
+            .zip(&self.directions)
+            .zip(self.residuals.iter().zip(&self.weights))
+            .filter_map(|((c, u), (&r, &w))| c.as_ref().map(|c| (c, u, r, w)))
+    }
+
     /// Per point the IRLS weight (1 on non-reweighted iterations, 0 without correspondence).
     pub fn weights(&self) -> &[f64] {
         &self.weights

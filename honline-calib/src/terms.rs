@@ -344,14 +344,12 @@ impl EnergyTerm<OnlineCtx> for ShapeValidity {
         ctx: &OnlineCtx,
         ne: &mut NormalEquations,
     ) -> Result<TermStats, TermError> {
-        let mut stats = TermStats::ZERO;
-        for (c, cols) in &self.rows {
-            let v = c.value(&ctx.beta);
-            if v < 0.0 && !cols.is_empty() {
-                stats += ne.add_row(cols, v, self.weight)?;
-            }
-        }
-        Ok(stats)
+        self.rows
+            .iter()
+            .filter(|(c, cols)| !cols.is_empty() && c.value(&ctx.beta) < 0.0)
+            .try_fold(TermStats::ZERO, |acc, (c, cols)| {
+                Ok(acc + ne.add_row(cols, c.value(&ctx.beta), self.weight)?)
+            })
     }
 }
 

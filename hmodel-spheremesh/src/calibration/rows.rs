@@ -181,14 +181,7 @@ impl ShapeRows {
         let theta = layout.pose;
         let mut cols = [Vector3::zeros(); MAX_ELEMENT_DOFS];
         let mut out = DataEnergy::default();
-        for (((c, u), &r), &wr) in ctx
-            .correspondences()
-            .iter()
-            .zip(ctx.directions())
-            .zip(ctx.residuals())
-            .zip(ctx.weights())
-        {
-            let Some(c) = c else { continue };
+        for (c, u, r, wr) in ctx.d2m_rows() {
             let dofs =
                 jacobian.columns(posed, c.element as usize, &c.spheres, &c.weights, &mut cols);
             for (&d, col) in dofs.iter().zip(&cols) {
