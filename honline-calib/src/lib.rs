@@ -29,8 +29,11 @@
 //!   their sum (Fig. 4.3), not each.
 //! - Every solved frame is a measurement, scaled by [`OnlineConfig::measurement_weight`]
 //!   (1/20), instead of honline's every 20th frame from frame 40 with measurement noise 1000.
-//! - E_iekf uses `Σ̂⁻¹` (Eq. 4.11), not honline's `H²`; it also runs in the KF and per-frame
-//!   modes' documentation sense only where Table 2 says so (the joint estimator).
+//! - E_iekf uses `Σ̂⁻¹` (Eq. 4.11), not honline's `H²`, and only the joint estimator runs it.
+//! - The Laplace information comes from the data terms only (Eq. 4.5), the pose marginalized;
+//!   priors and barriers shape the mode but are not counted as measurements.
+//! - Not yet here: loss detection and re-initialization (the first pose comes from
+//!   [`OnlineCalibrator::set_pose`] or the PCA mean placed on the points), Offline-Hard/Soft.
 //! - β moves on the non-rigid LM iterations only (honline); each step is clamped to the β bounds
 //!   and dropped when the basis refuses the shape, so every output is a valid model.
 //! - A frame with too few points is not solved: the estimate and its certainty are kept, the

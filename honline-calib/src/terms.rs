@@ -399,3 +399,99 @@ impl EnergyTerm<OnlineCtx> for IekfPrior {
         })
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use hand_model::query::View;
+    use hand_model::solver::IrlsParams;
+    use hand_model::spheremesh::default_right_hand;
+
+    /// The β terms' half gradients `b = −½∂E/∂x` against central differences of their energies,
+    /// over every active β and latent unknown, with a violated validity constraint, β bounds
+    /// crossed and a dense IEKF information matrix.
+    #[test]
+    fn shape_terms_match_finite_differences() {
+        let base = default_right_hand();
+        let basis = ShapeBasis::honline(&base).unwrap();
+        let active = crate::ShapeSubset::Observable.indices(&basis);
+        let k = active.len();
+        let layout = Layout {
+            num_dofs: base.skeleton.num_dofs(),
+            beta: base.skeleton.num_dofs(),
+            latent: base.skeleton.num_dofs() + k,
+            active: active.clone(),
+        };
+        let params = ShapePriorParams {
+            weight: 2.0,
+            radius_weight: 5.0,
+            limits: 100.0,
+            damping: 0.0,
+        };
+        let prior = ShapePrior::new(&basis, &layout, params);
+        let mut constraints = finger_order_constraints(&basis);
+        assert!(!constraints.is_empty());
+        // A constraint the test state violates.
+        constraints[0].kappa.push((active[0], -3.0));
+        let validity = ShapeValidity::new(constraints, &layout, 7.0);
+        let iekf = IekfPrior::new(&layout);
+        let mut beta = basis.template_values();
+        for (j, &i) in active.iter().enumerate() {
+            beta[i] *= 1.0 + 0.03 * ((j * 7 % 11) as f64 - 5.0) / 5.0;
+        }
+        let lim = basis.params[active[0]].limits.unwrap();
+        beta[active[0]] = lim[1] + 0.7;
+        let a = DMatrix::from_fn(k, k, |i, j| ((i * 3 + j * 5) % 7) as f64 * 0.1);
+        let info = &a * a.transpose() + DMatrix::identity(k, k);
+        let mean: Vec<f64> = active
+            .iter()
+            .map(|&i| basis.params[i].template_value)
+            .collect();
+        let tracking = TrackingCtx::owned(
+            base.clone(),
+            View::Orthographic(nalgebra::Vector3::z()),
+            IrlsParams::default(),
+        )
+        .unwrap();
+        let mut ctx = OnlineCtx {
+            tracking,
+            beta,
+            latent: [1.02, 0.97, 1.05],
+            prior: Some((mean, info)),
+            dirty: false,
+        };
+        let terms: [&dyn EnergyTerm<OnlineCtx>; 3] = [&prior, &validity, &iekf];
+        let energy = |ctx: &OnlineCtx| {
+            let mut ne = NormalEquations::new(layout.dim());
+            terms
+                .iter()
+                .map(|t| t.accumulate(ctx, &mut ne).unwrap().energy)
+                .sum::<f64>()
+        };
+        let mut ne = NormalEquations::new(layout.dim());
+        for t in terms {
+            t.accumulate(&ctx, &mut ne).unwrap();
+        }
+        // Every term is piecewise quadratic: central differences are exact away from the kinks.
+        let h = 1e-3;
+        let mut worst: f64 = 0.0;
+        for x in layout.beta..layout.dim() {
+            let mut shift = |ctx: &mut OnlineCtx, d: f64| {
+                if x < layout.latent {
+                    ctx.beta[active[x - layout.beta]] += d;
+                } else {
+                    ctx.latent[x - layout.latent] += d;
+                }
+            };
+            shift(&mut ctx, h);
+            let ep = energy(&ctx);
+            shift(&mut ctx, -2.0 * h);
+            let em = energy(&ctx);
+            shift(&mut ctx, h);
+            let fd = -0.5 * (ep - em) / (2.0 * h);
+            let b = ne.rhs()[x];
+            worst = worst.max((fd - b).abs() / b.abs().max(1.0));
+        }
+        assert!(worst < 1e-5, "worst relative error {worst}");
+    }
+}
