@@ -476,7 +476,7 @@ mod tests {
         let h = 1e-3;
         let mut worst: f64 = 0.0;
         for x in layout.beta..layout.dim() {
-            let mut shift = |ctx: &mut OnlineCtx, d: f64| {
+            let shift = |ctx: &mut OnlineCtx, d: f64| {
                 if x < layout.latent {
                     ctx.beta[active[x - layout.beta]] += d;
                 } else {
