@@ -2,6 +2,8 @@
 //! and its query geometry, the sensor points with their monocular front-facing correspondences
 //! (thesis §3.3.1, Fig. 3.9) and IRLS weights, and the model→data push constraints of Eq. 3.5.
 
+use std::borrow::Cow;
+
 use hand_model::kinematics::{Pose, PosedSkeleton, Skeleton};
 use hand_model::query::{Projection, SphereMeshGeometry, View, NO_SEED};
 use hand_model::render::{DepthRenderer, Intrinsics, PixelHit};
@@ -50,7 +52,9 @@ pub struct SilhouettePush {
 /// the current number of points.
 #[derive(Clone, Debug)]
 pub struct TrackingCtx<'m> {
-    template: &'m SphereMeshTemplate,
+    /// Borrowed from the tracker, or owned after [`TrackingCtx::set_template`] (online
+    /// calibration reshapes the model between iterations).
+    template: Cow<'m, SphereMeshTemplate>,
     elements: Vec<Element>,
     jacobian: FootpointJacobian,
     /// Per sphere, an element that holds it (for the Jacobian of a sphere center).
@@ -101,6 +105,25 @@ impl<'m> TrackingCtx<'m> {
         view: View,
         irls: IrlsParams,
     ) -> Result<Self, ModelError> {
+        Self::with_template(Cow::Borrowed(template), view, irls)
+    }
+
+    /// As [`TrackingCtx::new`], owning its template (for a context that outlives the template it
+    /// was built from, e.g. one reshaped by [`TrackingCtx::set_template`]).
+    pub fn owned(
+        template: SphereMeshTemplate,
+        view: View,
+        irls: IrlsParams,
+    ) -> Result<TrackingCtx<'static>, ModelError> {
+        TrackingCtx::with_template(Cow::Owned(template), view, irls)
+    }
+
+    fn with_template(
+        cow: Cow<'m, SphereMeshTemplate>,
+        view: View,
+        irls: IrlsParams,
+    ) -> Result<Self, ModelError> {
+        let template: &SphereMeshTemplate = &cow;
         let pose = Pose::zeros(&template.skeleton);
         let posed = PosedSphereMesh::new(template, &pose);
         let elements: Vec<Element> = template.elements.iter().map(|e| e.element).collect();
@@ -118,9 +141,10 @@ impl<'m> TrackingCtx<'m> {
                 }
             }
         }
+        let jacobian = FootpointJacobian::new(template)?;
         Ok(Self {
-            template,
-            jacobian: FootpointJacobian::new(template)?,
+            template: cow,
+            jacobian,
             elements,
             sphere_element,
             pose,
@@ -236,7 +260,7 @@ impl<'m> TrackingCtx<'m> {
             self.correspondences.fill(None);
             return Ok(());
         }
-        self.posed.update(self.template, &self.pose);
+        self.posed.update(&self.template, &self.pose);
         if self.geometry.update(&self.posed.spheres).is_err() {
             self.correspondences.fill(None);
             return Err(TermError::Failed("posed spheres are not finite"));
@@ -350,9 +374,34 @@ impl<'m> TrackingCtx<'m> {
         Ok(())
     }
 
-    /// The template.
-    pub fn template(&self) -> &'m SphereMeshTemplate {
-        self.template
+    /// The template (as last set).
+    pub fn template(&self) -> &SphereMeshTemplate {
+        &self.template
+    }
+
+    /// Replace the template by a reshaped one of the same topology (same spheres, attachments,
+    /// elements and skeleton DOFs; e.g. the template at another honline β, thesis §4.3): the
+    /// element Jacobians only depend on the topology, so they are kept. The model is re-posed at
+    /// the next [`TrackingCtx::update`]. An error when the topology differs.
+    pub fn set_template(&mut self, template: SphereMeshTemplate) -> Result<(), ModelError> {
+        let old = &*self.template;
+        let same = template.spheres.len() == old.spheres.len()
+            && template.elements.len() == old.elements.len()
+            && template.skeleton.num_dofs() == old.skeleton.num_dofs()
+            && template.skeleton.bones().len() == old.skeleton.bones().len()
+            && template
+                .elements
+                .iter()
+                .zip(&old.elements)
+                .all(|(a, b)| a.element.spheres() == b.element.spheres());
+        if !same {
+            return Err(ModelError::InvalidArgument {
+                name: "template",
+                reason: "the new template has another topology".into(),
+            });
+        }
+        self.template = Cow::Owned(template);
+        Ok(())
     }
 
     /// The posed template at the last update.
@@ -390,6 +439,16 @@ impl<'m> TrackingCtx<'m> {
         &self.residuals
     }
 
+    /// The d2m rows of the points with a correspondence: `(q, u, r, w)` — footpoint, unit
+    /// residual direction, residual `−‖p − q‖` and IRLS weight (Eq. 3.4).
+    pub fn d2m_rows(&self) -> impl Iterator<Item = (&Projection, &Vector3<f64>, f64, f64)> + '_ {
+        self.correspondences
+            .iter()
+            .zip(&self.directions)
+            .zip(self.residuals.iter().zip(&self.weights))
+            .filter_map(|((c, u), (&r, &w))| c.as_ref().map(|c| (c, u, r, w)))
+    }
+
     /// Per point the IRLS weight (1 on non-reweighted iterations, 0 without correspondence).
     pub fn weights(&self) -> &[f64] {
         &self.weights
@@ -420,6 +479,7 @@ impl PoseContext for TrackingCtx<'_> {
     fn skeleton(&self) -> &Skeleton {
         &self.template.skeleton
     }
+
     fn pose(&self) -> &Pose {
         &self.pose
     }

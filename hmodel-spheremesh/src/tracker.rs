@@ -68,7 +68,8 @@ pub enum FrontFacingView {
 }
 
 impl FrontFacingView {
-    fn view(self) -> View {
+    /// The query view of this camera model.
+    pub fn view(self) -> View {
         match self {
             Self::Orthographic => View::Orthographic(Vector3::z()),
             Self::Perspective => View::Perspective {
@@ -195,6 +196,8 @@ impl Terms {
 
 /// The solve of one frame, as [`FrameLoop`] drives it.
 struct Problem<'m> {
+    /// The template the context borrows (its skeleton drives the pose retraction).
+    template: &'m SphereMeshTemplate,
     ctx: TrackingCtx<'m>,
     solver: LmSolver,
     ws: LmWorkspace,
@@ -206,7 +209,7 @@ struct Problem<'m> {
 impl TrackingProblem for Problem<'_> {
     fn solve(&mut self, pose: &mut Pose) -> bool {
         let (list, n) = self.terms.list();
-        let sk = &self.ctx.template().skeleton;
+        let sk = &self.template.skeleton;
         timed_solve(
             &self.solver,
             &mut self.ws,
@@ -315,6 +318,7 @@ impl<'m> Tracker<'m> {
             frames: FrameLoop::new(mean_pose.clone(), config.loss.clone()),
             posed: PosedSphereMesh::new(template, &mean_pose),
             problem: Problem {
+                template,
                 ctx,
                 solver,
                 ws,

@@ -1,5 +1,63 @@
-//! # honline-calib — online hand-model personalization (thesis Ch. 4)
+//! # honline-calib — online hand-model personalization with uncertainty (thesis Ch. 4)
 //!
-//! Not built yet (issue 8). This crate will hold the per-frame Laplace estimate, the split
-//! cumulative (Kalman filter) and joint cumulative (IEKF/LMKF) shape estimators with uncertainty,
-//! the Offline-Hard/Soft baselines, the shape-space prior and shape-validity barriers.
+//! The tracker learns the user's hand shape while tracking and knows how certain each shape
+//! parameter is (Tkach et al. 2017, thesis §4.3).
+//!
+//! - State `x_n = [θ_n; β_n]`: the sphere-mesh pose and the honline shape vector β
+//!   (ANCHOR-FACTS §2.5), restricted to [`ShapeSubset::Observable`] (60 of 75 entries: the palm
+//!   centers, the wrist extents, the thumb membrane and `thumb_additional` are in the null space
+//!   of the data terms or buried, and stay at the template).
+//! - Per frame, the joint pose+shape Levenberg–Marquardt of Eq. 4.2–4.4 ([`OnlineCalibrator`]):
+//!   the tracker's terms (Ch. 3: d2m, m2d, collision, temporal, joint limits, PCA pose prior) with
+//!   the data rows extended by exact β columns (shared with the offline calibration,
+//!   [`hmodel_spheremesh::calibration::ShapeRows`]), the shape-space prior of Eq. 4.14 with its
+//!   latent height/width/thickness β̃ ([`terms::ShapePrior`]), the shape-validity barriers of
+//!   Eq. 4.15 ([`terms::ShapeValidity`]) and the β bounds.
+//! - The Laplace approximation of the per-frame posterior (Eq. 4.5–4.6): the Gauss–Newton
+//!   Hessian of the data terms at the last linearization, marginalized over the pose by a Schur
+//!   complement ([`marginal_information`]).
+//! - The estimators ([`Estimator`]): per-frame (§4.3.1), split cumulative — a Kalman filter in
+//!   information form on the per-frame modes (Eq. 4.8–4.10, Table 1, [`ShapeBelief::fuse`]) —
+//!   and joint cumulative, the default — E_iekf (Eq. 4.11) inside the LM, an IEKF (Table 2,
+//!   §4.6.3, [`ShapeBelief::absorb`]).
+//! - Output per frame ([`OnlineFrame`]): β̂_n and the per-frame mode β*_n with their certainties
+//!   (the diagonals of Σ̂_n⁻¹ and Σ*_n⁻¹), in the DESIGN.md record (`shape`, `shape_certainty`).
+//!
+//! # Choices where the thesis is silent or the originals differ (ANCHOR-FACTS §7)
+//! - The full measured information (off-diagonal entries included) enters the filter; honline
+//!   zeroed the off-diagonal ones. Two phalanges of a straight finger are then only certain in
+//!   their sum (Fig. 4.3), not each.
+//! - Every solved frame is a measurement, scaled by [`OnlineConfig::measurement_weight`]
+//!   (1/20), instead of honline's every 20th frame from frame 40 with measurement noise 1000.
+//! - E_iekf uses `Σ̂⁻¹` (Eq. 4.11), not honline's `H²`, and only the joint estimator runs it.
+//! - The Laplace information comes from the data terms only (Eq. 4.5), the pose marginalized;
+//!   priors and barriers shape the mode but are not counted as measurements.
+//! - Not yet here: loss detection and re-initialization (the first pose comes from
+//!   [`OnlineCalibrator::set_pose`] or the PCA mean placed on the points), Offline-Hard/Soft.
+//! - β moves on the non-rigid LM iterations only (honline); each step is clamped to the β bounds
+//!   and dropped when the basis refuses the shape, so every output is a valid model.
+//! - A frame with too few points is not solved: the estimate and its certainty are kept, the
+//!   frame is flagged `no_hand`. A hand that never bends a finger keeps those phalanx lengths
+//!   at the template with low certainty (no data information reaches them).
+//!
+//! # Example
+//! ```
+//! use hand_model::spheremesh::default_right_hand;
+//! use honline_calib::{OnlineCalibrator, OnlineConfig};
+//! use sensor_io::preprocess::PreprocessedFrame;
+//!
+//! let template = default_right_hand();
+//! let mut calib = OnlineCalibrator::new(&template, OnlineConfig::default(), None).unwrap();
+//! let out = calib.track(&PreprocessedFrame::default(), 0, 0.0);
+//! assert_eq!(out.record.flags, ["no_hand"]);
+//! assert!(out.beta.iter().all(|b| b.is_finite()));
+//! ```
+
+mod filter;
+mod online;
+mod shape;
+pub mod terms;
+
+pub use filter::{marginal_information, Estimator, ShapeBelief};
+pub use online::{OnlineCalibrator, OnlineConfig, OnlineError, OnlineFrame};
+pub use shape::{beta_error, error_subset, ShapeSubset};

@@ -22,6 +22,7 @@ use sensor_io::preprocess::PreprocessedFrame;
 use sensor_io::SensorView;
 use serde::{Deserialize, Serialize};
 
+use super::rows::{DataWeights, Row, RowLayout, ShapeRows};
 use super::shape::{ShapeSpace, ShapeState};
 use crate::context::TrackingCtx;
 use crate::jacobian::{FootpointJacobian, MAX_ELEMENT_DOFS};
@@ -260,64 +261,6 @@ pub enum CalibrationError {
     Template(#[from] hand_model::ModelError),
 }
 
-/// A sparse row assembled in a dense scratch vector.
-struct Row {
-    values: Vec<f64>,
-    /// Whether an index is in `touched` (a value may sum back to 0).
-    marked: Vec<bool>,
-    touched: Vec<usize>,
-    pairs: Vec<(usize, f64)>,
-}
-
-impl Row {
-    fn new(n: usize) -> Self {
-        Self {
-            values: vec![0.0; n],
-            marked: vec![false; n],
-            touched: Vec::new(),
-            pairs: Vec::new(),
-        }
-    }
-
-    fn add(&mut self, i: usize, v: f64) {
-        if !self.marked[i] {
-            self.marked[i] = true;
-            self.touched.push(i);
-        }
-        self.values[i] += v;
-    }
-
-    /// Add `w j²` of the row's entries from `from` on to `info[i − from]` (the data term's
-    /// information about each shape unknown), then [`Row::flush`].
-    fn flush_data(
-        &mut self,
-        ne: &mut NormalEquations,
-        r: f64,
-        w: f64,
-        from: usize,
-        info: &mut [f64],
-    ) -> f64 {
-        for &i in &self.touched {
-            if let Some(x) = i.checked_sub(from).and_then(|k| info.get_mut(k)) {
-                *x += w * self.values[i] * self.values[i];
-            }
-        }
-        self.flush(ne, r, w)
-    }
-
-    /// Add the row to `ne` and reset; returns the energy `w r²`.
-    fn flush(&mut self, ne: &mut NormalEquations, r: f64, w: f64) -> f64 {
-        self.pairs.clear();
-        for &i in &self.touched {
-            self.pairs.push((i, self.values[i]));
-            self.values[i] = 0.0;
-            self.marked[i] = false;
-        }
-        self.touched.clear();
-        ne.add_row(&self.pairs, r, w).map_or(0.0, |s| s.energy)
-    }
-}
-
 /// Energies of one linearization, by part, and the data terms' information per shape unknown.
 #[derive(Clone, Debug, Default)]
 struct Parts {
@@ -370,7 +313,8 @@ impl Problem<'_> {
         let n = self.dim();
         let so = self.shape_offset();
         let mut ne = NormalEquations::new(n);
-        let mut row = Row::new(n);
+        let mut rows = ShapeRows::new(n);
+        let shape_index: Vec<Option<usize>> = (0..self.space.len()).map(|i| Some(so + i)).collect();
         let mut parts = Parts {
             info: vec![0.0; self.space.len()],
             ..Parts::default()
@@ -401,88 +345,25 @@ impl Problem<'_> {
             }
             let posed = ctx.posed_mesh().clone();
             let theta = f * self.nd;
-            // d2m (Eq. 3.11): r = −‖p − q‖, row uᵀ∂q.
-            for (((c, u), &r), &wr) in ctx
-                .correspondences()
-                .iter()
-                .zip(ctx.directions())
-                .zip(ctx.residuals())
-                .zip(ctx.weights())
-            {
-                let Some(c) = c else { continue };
-                let dofs = self.jacobian.columns(
-                    &posed,
-                    c.element as usize,
-                    &c.spheres,
-                    &c.weights,
-                    &mut cols,
-                );
-                for (&d, col) in dofs.iter().zip(&cols) {
-                    row.add(theta + d, u.dot(col));
-                }
-                let un = u.dot(&c.normal);
-                for (&s, &w) in c.spheres.iter().zip(&c.weights) {
-                    if w == 0.0 {
-                        continue;
-                    }
-                    self.space.for_each_sphere_column(
-                        t,
-                        &posed,
-                        s as usize,
-                        w,
-                        &mut |i, dc, dr| {
-                            row.add(so + i, u.dot(&dc) + un * dr);
-                        },
-                    );
-                }
-                let w = self.config.d2m * wr;
-                row.flush_data(&mut ne, r, w, so, &mut parts.info);
-                // The energy the steps are judged by: the Huber norm itself (its IRLS
-                // quadratic has the same value and gradient at the linearization point).
-                parts.d2m += self.config.d2m
-                    * if ctx.reweighted() {
-                        irls.penalty(r)
-                    } else {
-                        r * r
-                    };
-            }
-            // m2d (Eq. 3.12): two pixel rows per push.
-            if let Some(camera) = frame.sensor.camera.as_ref() {
-                let w = self.config.m2d * ctx.m2d_pixel_weight();
-                for push in ctx.pushes() {
-                    let x = &push.point;
-                    let res = camera.project(x) - push.target;
-                    let jp = camera.projection_jacobian(x);
-                    let dofs = self.jacobian.columns(
-                        &posed,
-                        push.element as usize,
-                        &push.spheres,
-                        &push.weights,
-                        &mut cols,
-                    );
-                    let normal = posed_normal(&posed, push);
-                    for axis in 0..2 {
-                        let g = jp.row(axis).transpose();
-                        for (&d, col) in dofs.iter().zip(&cols) {
-                            row.add(theta + d, g.dot(col));
-                        }
-                        let gn = g.dot(&normal);
-                        for (&s, &wt) in push.spheres.iter().zip(&push.weights) {
-                            if wt == 0.0 {
-                                continue;
-                            }
-                            self.space.for_each_sphere_column(
-                                t,
-                                &posed,
-                                s as usize,
-                                wt,
-                                &mut |i, dc, dr| row.add(so + i, g.dot(&dc) + gn * dr),
-                            );
-                        }
-                        parts.m2d += row.flush_data(&mut ne, res[axis], w, so, &mut parts.info);
-                    }
-                }
-            }
+            let layout = RowLayout {
+                pose: theta,
+                shape: &shape_index,
+            };
+            let weights = DataWeights {
+                d2m: self.config.d2m,
+                m2d: self.config.m2d,
+            };
+            let data = rows.add_frame(
+                &ctx,
+                &self.space,
+                &layout,
+                &weights,
+                &mut ne,
+                &mut parts.info,
+                so,
+            );
+            parts.d2m += data.d2m;
+            parts.m2d += data.m2d;
             // m2d on a complete cloud (Eq. 3.12 with Π_D the closest data point): samples of
             // the posed model's visible surface pulled to their nearest cloud point, weighted so
             // that the two distances keep the thesis' balance τ_m2d/τ_d2m per unit of
@@ -508,7 +389,7 @@ impl Problem<'_> {
                         &mut cols,
                     );
                     for (&dof, col) in dofs.iter().zip(&cols) {
-                        row.add(theta + dof, u.dot(col));
+                        rows.row.add(theta + dof, u.dot(col));
                     }
                     let un = u.dot(&q.normal);
                     for (&sph, &wt) in q.spheres.iter().zip(&q.weights) {
@@ -521,11 +402,11 @@ impl Problem<'_> {
                             sph as usize,
                             wt,
                             &mut |i, dc, dr| {
-                                row.add(so + i, u.dot(&dc) + un * dr);
+                                rows.row.add(so + i, u.dot(&dc) + un * dr);
                             },
                         );
                     }
-                    parts.m2d += row.flush_data(&mut ne, len, w, so, &mut parts.info);
+                    parts.m2d += rows.row.flush_data(&mut ne, len, w, so, &mut parts.info);
                 }
             }
             // Joint limits of θ_n.
@@ -539,13 +420,13 @@ impl Problem<'_> {
                 } else {
                     continue;
                 };
-                row.add(theta + d, 1.0);
-                parts.rest += row.flush(&mut ne, r, self.config.limits);
+                rows.row.add(theta + d, 1.0);
+                parts.rest += rows.row.flush(&mut ne, r, self.config.limits);
             }
         }
         let rest = PosedSphereMesh::new(t, &Pose::zeros(&t.skeleton));
-        parts.valid += self.validity(t, &rest, &mut ne, &mut row);
-        parts.rest += self.shape_priors(state, &rest, &mut ne, &mut row);
+        parts.valid += self.validity(t, &rest, &mut ne, &mut rows.row);
+        parts.rest += self.shape_priors(state, &rest, &mut ne, &mut rows.row);
         ne.symmetrize();
         Ok((ne, parts))
     }
@@ -780,21 +661,6 @@ fn nearest_point(points: &[Vector3<f64>], q: &Vector3<f64>) -> Option<Vector3<f6
         .iter()
         .min_by(|a, b| (*a - q).norm_squared().total_cmp(&(*b - q).norm_squared()))
         .copied()
-}
-
-/// The normal of the element surface at a push point (`q − s` of its interpolated sphere).
-fn posed_normal(posed: &PosedSphereMesh, push: &crate::SilhouettePush) -> Vector3<f64> {
-    let (mut s, mut r) = (Vector3::zeros(), 0.0);
-    for (&i, &w) in push.spheres.iter().zip(&push.weights) {
-        s += posed.spheres[i as usize].center * w;
-        r += posed.spheres[i as usize].radius * w;
-    }
-    let d = push.point - s;
-    if r > 0.0 && d.norm() > 1e-12 {
-        d / d.norm()
-    } else {
-        Vector3::zeros()
-    }
 }
 
 /// Calibrate `base` to `frames` from the initial per-frame poses (thesis Eq. 3.8, joint LM; see

@@ -70,14 +70,7 @@ impl EnergyTerm<TrackingCtx<'_>> for D2m {
         let mut row = [0.0f64; MAX_ELEMENT_DOFS];
         let mut pairs = [(0usize, 0.0f64); MAX_ELEMENT_DOFS];
         let mut stats = TermStats::ZERO;
-        for (((c, u), &r), &w) in ctx
-            .correspondences()
-            .iter()
-            .zip(ctx.directions())
-            .zip(ctx.residuals())
-            .zip(ctx.weights())
-        {
-            let Some(c) = c else { continue };
+        for (c, u, r, w) in ctx.d2m_rows() {
             let e = c.element as usize;
             let dofs = jac.columns(posed, e, &c.spheres, &c.weights, &mut cols);
             let k = dofs.len();

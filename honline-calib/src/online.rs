@@ -1,0 +1,524 @@
+//! The online calibrator: per frame, the joint pose+shape LM (Eq. 4.2–4.4), the Laplace
+//! approximation of its posterior (Eq. 4.5–4.6) and the estimator's update.
+
+use std::time::Instant;
+
+use hand_model::kinematics::Pose;
+use hand_model::solver::terms::{JointLimits, PosePrior, Temporal};
+use hand_model::solver::{
+    sphere_mesh_points, EnergyTerm, IterInfo, LmCallback, LmError, LmSolver, LmWorkspace, NoTerm,
+    NormalEquations, PcaPrior, PriorSetup, TermError,
+};
+use hand_model::spheremesh::{PosedSphereMesh, ShapeBasis, SphereMeshTemplate};
+use hand_model::ModelError;
+use hmodel_spheremesh::calibration::{DataWeights, ShapeSpace};
+use hmodel_spheremesh::terms::Collision;
+use hmodel_spheremesh::{TrackerConfig, TrackingCtx};
+use nalgebra::{DMatrix, DVector, Vector3};
+use sensor_io::preprocess::PreprocessedFrame;
+use sensor_io::record::HandRecord;
+use serde::{Deserialize, Serialize};
+
+use crate::filter::{marginal_information, Estimator, ShapeBelief};
+use crate::shape::ShapeSubset;
+use crate::terms::{
+    finger_order_constraints, IekfPrior, Layout, Lifted, OnlineCtx, ShapeData, ShapePrior,
+    ShapePriorParams, ShapeValidity,
+};
+
+/// Settings of the online calibration.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct OnlineConfig {
+    /// The estimator (default: the joint cumulative IEKF).
+    pub estimator: Estimator,
+    /// The β entries in the state.
+    pub subset: ShapeSubset,
+    /// The tracker's terms, weights and LM schedule (1 rigid + 7 iterations; β moves on the
+    /// non-rigid ones, as in honline).
+    pub tracker: TrackerConfig,
+    /// ω_shape-space (Eq. 4.14) per mm² for lengths and positions.
+    pub shape_prior: f64,
+    /// ω_shape-space per mm² for radii.
+    pub radius_prior: f64,
+    /// Weight of the β bounds (per mm²).
+    pub limits: f64,
+    /// Weight of the shape-validity barriers (Eq. 4.15, per mm²).
+    pub valid: f64,
+    /// LM damping of β (per mm²).
+    pub beta_damping: f64,
+    /// The per-frame data information is scaled by this before it enters the estimate: the
+    /// rows of consecutive frames are far from independent (the same surface seen again), so
+    /// counting each frame's information in full makes the estimate overconfident after a few
+    /// frames. 1/20 counts one frame in twenty (honline took a measurement every 20th frame).
+    pub measurement_weight: f64,
+    /// Information of the initial belief (per mm², honline: 0.001).
+    pub initial_information: f64,
+    /// Frames with fewer points are not solved (flag `no_hand`): the estimate is kept.
+    pub min_points: usize,
+}
+
+impl Default for OnlineConfig {
+    fn default() -> Self {
+        Self {
+            estimator: Estimator::Iekf,
+            subset: ShapeSubset::Observable,
+            tracker: TrackerConfig::default(),
+            shape_prior: 10.0,
+            radius_prior: 10.0,
+            limits: 1e5,
+            valid: 1e3,
+            beta_damping: 10.0,
+            measurement_weight: 0.05,
+            initial_information: 1e-3,
+            min_points: 50,
+        }
+    }
+}
+
+/// Why a calibrator could not be built.
+#[derive(Debug, thiserror::Error)]
+pub enum OnlineError {
+    /// Invalid solver options.
+    #[error("solver: {0}")]
+    Solver(#[from] LmError),
+    /// A template without the honline β basis, or a prior that does not fit it.
+    #[error("model: {0}")]
+    Model(#[from] ModelError),
+}
+
+/// The output of one frame.
+#[derive(Clone, Debug, PartialEq)]
+pub struct OnlineFrame {
+    /// The DESIGN.md record: pose, keypoints, `shape` (the estimate β̂_n) and
+    /// `shape_certainty` (the cumulative certainty), energies, timing, flags.
+    pub record: HandRecord,
+    /// The estimate β̂_n (all entries; the inactive ones keep the template values).
+    pub beta: Vec<f64>,
+    /// The per-frame mode β*_n of the joint solve.
+    pub frame_beta: Vec<f64>,
+    /// The cumulative certainty: the diagonal of Σ̂_n⁻¹ (per mm², 0 for inactive entries).
+    pub certainty: Vec<f64>,
+    /// The per-frame certainty: the diagonal of Σ*_n⁻¹ (scaled by
+    /// [`OnlineConfig::measurement_weight`]; 0 when the frame was not solved).
+    pub frame_certainty: Vec<f64>,
+    /// Whether the frame was solved.
+    pub solved: bool,
+}
+
+/// Reshapes the context's template when β changed and accepts only valid β steps.
+struct ShapeCallback<'a> {
+    base: &'a SphereMeshTemplate,
+    basis: &'a ShapeBasis,
+    layout: &'a Layout,
+    next: Vec<f64>,
+    rejected: usize,
+}
+
+impl LmCallback<OnlineCtx> for ShapeCallback<'_> {
+    fn prepare(
+        &mut self,
+        pose: &Pose,
+        ctx: &mut OnlineCtx,
+        info: IterInfo,
+    ) -> Result<(), TermError> {
+        if ctx.dirty {
+            let t = self
+                .basis
+                .apply(self.base, &ctx.beta)
+                .map_err(|_| TermError::Failed("invalid shape"))?;
+            ctx.tracking
+                .set_template(t)
+                .map_err(|_| TermError::Failed("template topology changed"))?;
+            ctx.dirty = false;
+        }
+        ctx.tracking.update(pose, info.rigid_only)
+    }
+
+    /// β ← β + δβ clamped to the β bounds, β̃ ← β̃ + δβ̃; a step whose shape the basis refuses
+    /// (a negative radius, a non-finite value) is dropped, so every iterate is a valid model.
+    fn apply_aux(&mut self, ctx: &mut OnlineCtx, delta_aux: &[f64]) {
+        let off = self.layout.beta - self.layout.num_dofs;
+        let lat = self.layout.latent - self.layout.num_dofs;
+        let (Some(db), Some(dl)) = (
+            delta_aux.get(off..off + self.layout.active.len()),
+            delta_aux.get(lat..lat + 3),
+        ) else {
+            return;
+        };
+        if db.iter().chain(dl).all(|&d| d == 0.0) {
+            return;
+        }
+        self.next.clone_from(&ctx.beta);
+        for (&i, &d) in self.layout.active.iter().zip(db) {
+            let p = &self.basis.params[i];
+            let mut v = self.next[i] + d;
+            if let Some([lo, hi]) = p.limits {
+                v = v.clamp(lo, hi);
+            }
+            self.next[i] = v;
+        }
+        let latent = [
+            ctx.latent[0] + dl[0],
+            ctx.latent[1] + dl[1],
+            ctx.latent[2] + dl[2],
+        ];
+        let finite = latent.iter().chain(&self.next).all(|v| v.is_finite());
+        if finite && self.basis.apply(self.base, &self.next).is_ok() {
+            std::mem::swap(&mut ctx.beta, &mut self.next);
+            ctx.latent = latent.map(|v| v.clamp(0.5, 2.0));
+            ctx.dirty = true;
+        } else {
+            self.rejected += 1;
+        }
+    }
+}
+
+/// Joint tracking and online calibration of the sphere-mesh model (thesis Ch. 4, module docs of
+/// the crate). One per sequence.
+pub struct OnlineCalibrator {
+    base: SphereMeshTemplate,
+    basis: ShapeBasis,
+    config: OnlineConfig,
+    layout: Layout,
+    solver: LmSolver,
+    ws: LmWorkspace,
+    ctx: OnlineCtx,
+    data: ShapeData,
+    prior: ShapePrior,
+    validity: ShapeValidity,
+    iekf: IekfPrior,
+    collision: Lifted<Collision>,
+    limits: JointLimits,
+    temporal: Temporal,
+    pose_prior: Option<PosePrior>,
+    belief: ShapeBelief,
+    pose: Pose,
+    mean_pose: Pose,
+    initialized: bool,
+    data_ne: NormalEquations,
+    next: Vec<f64>,
+}
+
+impl OnlineCalibrator {
+    /// Calibrate from `base` (the default template, or any with the honline β basis) with
+    /// `config` and an optional PCA pose prior.
+    pub fn new(
+        base: &SphereMeshTemplate,
+        config: OnlineConfig,
+        prior: Option<&PcaPrior>,
+    ) -> Result<Self, OnlineError> {
+        let sk = &base.skeleton;
+        let tc = &config.tracker;
+        let PriorSetup {
+            prior: pose_prior,
+            mean_pose,
+            ..
+        } = PriorSetup::new::<OnlineError>(sk, prior, &tc.pose_prior, &tc.lm)?;
+        let num_pca = pose_prior.as_ref().map_or(0, PosePrior::num_aux);
+        let space = ShapeSpace::new(base, false)?;
+        let basis = space.basis().clone();
+        let active = config.subset.indices(&basis);
+        let nd = sk.num_dofs();
+        let layout = Layout {
+            num_dofs: nd,
+            beta: nd + num_pca,
+            latent: nd + num_pca + active.len(),
+            active,
+        };
+        let solver = LmSolver::new(sk, layout.dim() - nd, tc.lm.clone())?;
+        let ws = solver.workspace();
+        let mut tracking = TrackingCtx::owned(base.clone(), tc.view.view(), tc.irls.clone())?;
+        tracking.set_front_facing(tc.front_facing);
+        tracking.set_m2d(tc.enabled.m2d.then_some(tc.m2d_mode));
+        tracking.set_m2d_stride(tc.m2d_stride);
+        let beta = basis.template_values();
+        let mean: Vec<f64> = layout.active.iter().map(|&i| beta[i]).collect();
+        let weights = DataWeights {
+            d2m: if tc.enabled.d2m { tc.d2m.weight } else { 0.0 },
+            m2d: tc.m2d.weight,
+        };
+        Ok(Self {
+            data: ShapeData::new(space, &layout, weights),
+            prior: ShapePrior::new(
+                &basis,
+                &layout,
+                ShapePriorParams {
+                    weight: config.shape_prior,
+                    radius_weight: config.radius_prior,
+                    limits: config.limits,
+                    damping: config.beta_damping,
+                },
+            ),
+            validity: ShapeValidity::new(finger_order_constraints(&basis), &layout, config.valid),
+            iekf: IekfPrior::new(&layout),
+            collision: Lifted(Collision::new(base, tc.collision.clone())),
+            limits: JointLimits::new(sk, &tc.joint_limits),
+            temporal: Temporal::new(sphere_mesh_points(base), &tc.temporal),
+            pose_prior,
+            belief: ShapeBelief::vague(&mean, config.initial_information),
+            ctx: OnlineCtx {
+                tracking,
+                beta: beta.clone(),
+                latent: [1.0; 3],
+                prior: None,
+                dirty: false,
+            },
+            data_ne: NormalEquations::new(layout.dim()),
+            pose: mean_pose.clone(),
+            mean_pose,
+            initialized: false,
+            base: base.clone(),
+            basis,
+            layout,
+            solver,
+            ws,
+            config,
+            next: beta,
+        })
+    }
+
+    /// The β basis (names, template values, kinds).
+    pub fn basis(&self) -> &ShapeBasis {
+        &self.basis
+    }
+
+    /// The unknowns' layout (which β entries are estimated).
+    pub fn layout(&self) -> &Layout {
+        &self.layout
+    }
+
+    /// The settings.
+    pub fn config(&self) -> &OnlineConfig {
+        &self.config
+    }
+
+    /// The current pose.
+    pub fn pose(&self) -> &Pose {
+        &self.pose
+    }
+
+    /// The template at the current β of the tracking model.
+    pub fn template(&self) -> &SphereMeshTemplate {
+        self.ctx.tracking.template()
+    }
+
+    /// The current belief over the active β.
+    pub fn belief(&self) -> &ShapeBelief {
+        &self.belief
+    }
+
+    /// Start the next frame from `pose` (e.g. the first frame's known pose, thesis §4.4.2);
+    /// clears the temporal history. An error for a pose of the wrong length.
+    pub fn set_pose(&mut self, pose: &Pose) -> Result<(), OnlineError> {
+        self.pose = Pose::from_values(&self.base.skeleton, pose.values.clone())?;
+        self.initialized = true;
+        self.temporal.clear_history();
+        Ok(())
+    }
+
+    /// The mean pose moved so that the model's sphere centroid sits 10 mm behind the points'
+    /// centroid (the first frame without [`OnlineCalibrator::set_pose`]).
+    fn placed_pose(&self, points: &[Vector3<f64>]) -> Pose {
+        let mut pose = self.mean_pose.clone();
+        let n = points.len().max(1) as f64;
+        let target = points.iter().sum::<Vector3<f64>>() / n + Vector3::new(0.0, 0.0, 10.0);
+        let posed = PosedSphereMesh::new(self.template(), &pose);
+        let m = posed.spheres.len().max(1) as f64;
+        let center = posed.spheres.iter().map(|s| s.center).sum::<Vector3<f64>>() / m;
+        let sk = &self.base.skeleton;
+        for (name, d) in ["global_tx", "global_ty", "global_tz"]
+            .iter()
+            .zip((target - center).iter())
+        {
+            if let Some(i) = sk.dof_index(name) {
+                pose.values[i] += d;
+            }
+        }
+        pose
+    }
+
+    /// Track one frame and update the shape estimate (crate docs). Never returns a non-finite
+    /// value or an invalid shape: a frame that cannot be solved keeps the previous pose and
+    /// estimate and is flagged (`no_hand`, `solver_failed`).
+    pub fn track(&mut self, frame: &PreprocessedFrame, index: u64, timestamp: f64) -> OnlineFrame {
+        let start = Instant::now();
+        let mut rec = HandRecord::for_frame(index, timestamp);
+        let k = self.layout.active.len();
+        let mut frame_info = DMatrix::zeros(k, k);
+        let mut solved = false;
+        let finite_points = frame
+            .points
+            .iter()
+            .filter(|p| p.iter().all(|v| v.is_finite()));
+        if finite_points.count() >= self.config.min_points.max(1) {
+            let t0 = Instant::now();
+            self.ctx.tracking.set_frame(frame);
+            if !self.initialized {
+                self.pose = self.placed_pose(&frame.points);
+                self.initialized = true;
+            }
+            self.ctx.prior = (self.config.estimator == Estimator::Iekf).then(|| {
+                (
+                    self.belief.mean.iter().copied().collect(),
+                    self.belief.information.clone(),
+                )
+            });
+            let saved = (self.ctx.beta.clone(), self.ctx.latent);
+            let e = &self.config.tracker.enabled;
+            let none = NoTerm;
+            let pose_prior: &dyn EnergyTerm<OnlineCtx> = match (&self.pose_prior, e.pose_prior) {
+                (Some(p), true) => p,
+                _ => &none,
+            };
+            let list: [(bool, &dyn EnergyTerm<OnlineCtx>); 8] = [
+                (true, &self.data),
+                (e.collision, &self.collision),
+                (e.temporal, &self.temporal),
+                (e.joint_limits, &self.limits),
+                (true, pose_prior),
+                (true, &self.prior),
+                (true, &self.validity),
+                (true, &self.iekf),
+            ];
+            let mut terms: [&dyn EnergyTerm<OnlineCtx>; 8] = [&none; 8];
+            let mut n = 0;
+            for (on, t) in list {
+                if on {
+                    terms[n] = t;
+                    n += 1;
+                }
+            }
+            let mut callback = ShapeCallback {
+                base: &self.base,
+                basis: &self.basis,
+                layout: &self.layout,
+                next: std::mem::take(&mut self.next),
+                rejected: 0,
+            };
+            let mut pose = self.pose.clone();
+            let result = self.solver.solve(
+                &mut self.ws,
+                &self.base.skeleton,
+                &mut pose,
+                &mut self.ctx,
+                &terms[..n],
+                &mut callback,
+            );
+            self.next = callback.next;
+            let ok = matches!(result, Ok(r) if r.termination.was_successful())
+                && pose.values.iter().all(|v| v.is_finite());
+            rec.timing_us
+                .insert("solve".into(), t0.elapsed().as_secs_f64() * 1e6);
+            if ok {
+                let t1 = Instant::now();
+                // Eq. 4.5 at the last linearization: the data terms' Gauss–Newton Hessian,
+                // marginalized over the pose.
+                self.data_ne.clear();
+                let info = self
+                    .data
+                    .accumulate(&self.ctx, &mut self.data_ne)
+                    .ok()
+                    .and_then(|_| {
+                        self.data_ne.symmetrize();
+                        let theta: Vec<usize> = (0..self.layout.num_dofs).collect();
+                        let beta: Vec<usize> = (0..k).map(|j| self.layout.beta_index(j)).collect();
+                        marginal_information(self.data_ne.lhs(), &theta, &beta)
+                    });
+                if let Some(h) = info {
+                    frame_info = h * self.config.measurement_weight;
+                    solved = true;
+                    self.pose = pose;
+                }
+                rec.timing_us
+                    .insert("laplace".into(), t1.elapsed().as_secs_f64() * 1e6);
+            }
+            if solved {
+                rec.iterations = Some(self.ws.report().iterations as u32);
+                rec.add_energies(self.ws.report().terms.iter().map(|t| (t.name, t.energy)));
+                let posed = PosedSphereMesh::new(self.ctx.tracking.template(), &self.pose);
+                if self.config.tracker.enabled.temporal {
+                    let _ = self.temporal.push_frame(&posed.skeleton);
+                }
+            } else {
+                (self.ctx.beta, self.ctx.latent) = saved;
+                self.ctx.dirty = true;
+                rec.flags.push("solver_failed".into());
+            }
+        } else {
+            rec.flags.push("no_hand".into());
+        }
+        // The estimators (§4.3.1–4.3.3).
+        let t2 = Instant::now();
+        let mode = DVector::from_iterator(k, self.layout.active.iter().map(|&i| self.ctx.beta[i]));
+        if solved {
+            match self.config.estimator {
+                Estimator::PerFrame => {
+                    self.belief = ShapeBelief {
+                        mean: mode.clone(),
+                        information: frame_info.clone(),
+                    };
+                }
+                Estimator::Kf => {
+                    self.belief.fuse(&mode, &frame_info);
+                }
+                Estimator::Iekf => {
+                    self.belief.absorb(&mode, &frame_info);
+                }
+            }
+        }
+        if self.ctx.dirty {
+            if let Ok(t) = self.basis.apply(&self.base, &self.ctx.beta) {
+                if self.ctx.tracking.set_template(t).is_ok() {
+                    self.ctx.dirty = false;
+                }
+            }
+        }
+        let frame_beta = self.ctx.beta.clone();
+        let beta = self.estimate(&frame_beta);
+        let mut certainty = vec![0.0; self.basis.len()];
+        let mut frame_certainty = vec![0.0; self.basis.len()];
+        for (j, &i) in self.layout.active.iter().enumerate() {
+            certainty[i] = self.belief.information[(j, j)];
+            frame_certainty[i] = frame_info[(j, j)];
+        }
+        rec.timing_us
+            .insert("filter".into(), t2.elapsed().as_secs_f64() * 1e6);
+        let t = self.ctx.tracking.template();
+        let posed = PosedSphereMesh::new(t, &self.pose);
+        let names = t.skeleton.dofs().iter().map(|d| d.name.as_str());
+        rec.set_pose(names, &self.pose.values, &posed.keypoints(t));
+        for ((name, &b), &c) in self.basis.names().zip(&beta).zip(&certainty) {
+            rec.shape.insert(name.to_string(), b);
+            rec.shape_certainty.insert(name.to_string(), c);
+        }
+        rec.timing_us
+            .insert("track".into(), start.elapsed().as_secs_f64() * 1e6);
+        OnlineFrame {
+            record: rec,
+            beta,
+            frame_beta,
+            certainty,
+            frame_certainty,
+            solved,
+        }
+    }
+
+    /// The full β of the belief's mean (inactive entries from `fallback`), clamped to the β
+    /// bounds; `fallback` itself when that shape is not a valid model.
+    fn estimate(&self, fallback: &[f64]) -> Vec<f64> {
+        let mut beta = fallback.to_vec();
+        for (j, &i) in self.layout.active.iter().enumerate() {
+            let mut v = self.belief.mean[j];
+            if let Some([lo, hi]) = self.basis.params[i].limits {
+                v = v.clamp(lo, hi);
+            }
+            beta[i] = v;
+        }
+        if beta.iter().all(|v| v.is_finite()) && self.basis.apply(&self.base, &beta).is_ok() {
+            beta
+        } else {
+            fallback.to_vec()
+        }
+    }
+}
