@@ -303,6 +303,12 @@ impl OnlineCalibrator {
         self.ctx.tracking.template()
     }
 
+    /// The tracking context of the last solve: correspondences and posed model at the last
+    /// linearization (on the template of the per-frame β*).
+    pub fn context(&self) -> &TrackingCtx<'static> {
+        &self.ctx.tracking
+    }
+
     /// The current belief over the active β.
     pub fn belief(&self) -> &ShapeBelief {
         &self.belief

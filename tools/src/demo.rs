@@ -162,7 +162,7 @@ pub fn run(args: DemoArgs) -> Result<()> {
         median(&pre_ms)
     );
     println!(
-        "4. every method on the subject's true template (calibration joins with issue 8), scored against the ground truth:"
+        "4. every method starting from the subject's true template (`online` refines it while tracking), scored against the ground truth:"
     );
     for m in &methods {
         println!("   - {}: {}", m.name(), m.summary());

@@ -132,6 +132,9 @@ pub fn run(args: EvalArgs) -> Result<()> {
                     )
                 })?;
                 let camera = sf.pre.camera.as_ref().context("no camera (a bug)")?;
+                renderer.set_shape(&rec.shape).with_context(|| {
+                    format!("{} frame {}: its shape", args.track.display(), sf.position)
+                })?;
                 Some(renderer.render(&pose, camera)?.clone())
             };
             let frame = SensorFrame {

@@ -8,6 +8,7 @@
 //! renderers ([`ModelRenderer`]: the model at any recorded pose, what the algorithm-agnostic
 //! metrics of `hands eval` need).
 
+use std::collections::BTreeMap;
 use std::path::PathBuf;
 
 use anyhow::{bail, Result};
@@ -16,12 +17,13 @@ use hand_model::kinematics::{Pose, PosedSkeleton, Skeleton};
 use hand_model::render::{DepthRenderer, PixelHit};
 use hand_model::shape::Element;
 use hand_model::solver::PcaPrior;
-use hand_model::spheremesh::{PosedSphereMesh, SphereMeshTemplate};
+use hand_model::spheremesh::{PosedSphereMesh, ShapeBasis, SphereMeshTemplate};
 use hmodel_spheremesh::M2dMode;
+use honline_calib::{Estimator, OnlineConfig};
 use sensor_io::Camera;
 
 use crate::track::read_config;
-use crate::trackers::{CylinderTracker, FrameTracker, SphereMeshTracker};
+use crate::trackers::{CylinderTracker, FrameTracker, OnlineTracker, SphereMeshTracker};
 
 /// A tracking method as the commands see it.
 pub trait Method: Sync {
@@ -62,6 +64,8 @@ pub struct TrackSettings {
     pub disabled: Vec<&'static str>,
     /// Sphere-mesh E_m2d mode: `render` or `centers`.
     pub m2d: Option<String>,
+    /// The online calibration's estimator (method `online`; default: the config's, IEKF).
+    pub estimator: Option<Estimator>,
 }
 
 impl Default for TrackSettings {
@@ -72,6 +76,7 @@ impl Default for TrackSettings {
             rigid_first: true,
             disabled: Vec::new(),
             m2d: None,
+            estimator: None,
         }
     }
 }
@@ -104,7 +109,7 @@ macro_rules! apply_switches {
 }
 
 /// Every available method, in the order of tables and plots.
-pub const METHODS: &[&dyn Method] = &[&Cylinders, &SphereMesh];
+pub const METHODS: &[&dyn Method] = &[&Cylinders, &SphereMesh, &Online];
 
 /// The method called `name`; an unknown name is an error listing the available ones.
 pub fn by_name(name: &str) -> Result<&'static dyn Method> {
@@ -156,38 +161,58 @@ pub struct RenderedModel {
 pub trait ModelRenderer {
     /// The model at `pose` seen from `camera`.
     fn render(&mut self, pose: &Pose, camera: &Camera) -> Result<&RenderedModel>;
+
+    /// Render the next poses with a record's estimated shape (its `shape`: honline β by name),
+    /// for the methods that estimate the shape while tracking; the others ignore it.
+    fn set_shape(&mut self, _shape: &BTreeMap<String, f64>) -> Result<()> {
+        Ok(())
+    }
 }
 
-/// Ray-casts a sphere-mesh (§3.3.2).
-pub struct SphereMeshRenderer<'m> {
-    template: &'m SphereMeshTemplate,
+/// Ray-casts any sphere-mesh (§3.3.2) of one topology: the buffers of [`SphereMeshRenderer`],
+/// with the template given per call (a shape that changes from frame to frame).
+pub struct SphereMeshRaster {
     elements: Vec<Element>,
-    posed: PosedSphereMesh,
+    posed: Option<PosedSphereMesh>,
     renderer: DepthRenderer,
     hits: Vec<PixelHit>,
     out: RenderedModel,
 }
 
-impl<'m> SphereMeshRenderer<'m> {
-    /// A renderer of `template`.
-    pub fn new(template: &'m SphereMeshTemplate) -> Self {
+impl SphereMeshRaster {
+    /// A raster of templates with the elements of `template`.
+    pub fn new(template: &SphereMeshTemplate) -> Self {
         Self {
-            template,
             elements: template.elements.iter().map(|e| e.element).collect(),
-            posed: PosedSphereMesh::new(template, &Pose::zeros(&template.skeleton)),
+            posed: None,
             renderer: DepthRenderer::new(),
             hits: Vec::new(),
             out: RenderedModel::default(),
         }
     }
-}
 
-impl ModelRenderer for SphereMeshRenderer<'_> {
-    fn render(&mut self, pose: &Pose, camera: &Camera) -> Result<&RenderedModel> {
-        self.posed.update(self.template, pose);
+    /// `template` (with the elements given to [`SphereMeshRaster::new`]) at `pose` seen from
+    /// `camera`.
+    pub fn render(
+        &mut self,
+        template: &SphereMeshTemplate,
+        pose: &Pose,
+        camera: &Camera,
+    ) -> Result<&RenderedModel> {
+        if self
+            .posed
+            .as_ref()
+            .is_some_and(|p| p.spheres.len() != template.spheres.len())
+        {
+            self.posed = None;
+        }
+        let posed = self
+            .posed
+            .get_or_insert_with(|| PosedSphereMesh::new(template, pose));
+        posed.update(template, pose);
         self.renderer.render_hits(
             &hmodel_spheremesh::intrinsics(camera),
-            &self.posed.spheres,
+            &posed.spheres,
             &self.elements,
             |_| true,
             &mut self.hits,
@@ -199,6 +224,84 @@ impl ModelRenderer for SphereMeshRenderer<'_> {
             self.out.depth_mm.push(h.point.z);
         }
         Ok(&self.out)
+    }
+}
+
+/// Ray-casts a sphere-mesh (§3.3.2).
+pub struct SphereMeshRenderer<'m> {
+    template: &'m SphereMeshTemplate,
+    raster: SphereMeshRaster,
+}
+
+impl<'m> SphereMeshRenderer<'m> {
+    /// A renderer of `template`.
+    pub fn new(template: &'m SphereMeshTemplate) -> Self {
+        Self {
+            template,
+            raster: SphereMeshRaster::new(template),
+        }
+    }
+}
+
+impl ModelRenderer for SphereMeshRenderer<'_> {
+    fn render(&mut self, pose: &Pose, camera: &Camera) -> Result<&RenderedModel> {
+        self.raster.render(self.template, pose, camera)
+    }
+}
+
+/// Ray-casts a sphere-mesh whose shape is estimated per frame: the base template reshaped by
+/// the honline β of the record ([`ModelRenderer::set_shape`]) or of the tracker
+/// ([`ShapedRenderer::set_beta`]); the base template until a shape is given.
+pub struct ShapedRenderer<'m> {
+    base: &'m SphereMeshTemplate,
+    basis: &'m ShapeBasis,
+    shaped: Option<SphereMeshTemplate>,
+    beta: Vec<f64>,
+    raster: SphereMeshRaster,
+}
+
+impl<'m> ShapedRenderer<'m> {
+    /// A renderer of `base` reshaped through `basis` (the honline basis of `base`).
+    pub fn new(base: &'m SphereMeshTemplate, basis: &'m ShapeBasis) -> Self {
+        Self {
+            base,
+            basis,
+            shaped: None,
+            beta: basis.template_values(),
+            raster: SphereMeshRaster::new(base),
+        }
+    }
+
+    /// Render the next poses with the full β `beta` (in basis order); an error for a β the
+    /// basis refuses (wrong length, non-finite, negative radius).
+    pub fn set_beta(&mut self, beta: &[f64]) -> Result<()> {
+        if self.shaped.is_some() && beta == self.beta.as_slice() {
+            return Ok(());
+        }
+        self.shaped = Some(self.basis.apply(self.base, beta)?);
+        self.beta.clear();
+        self.beta.extend_from_slice(beta);
+        Ok(())
+    }
+}
+
+impl ModelRenderer for ShapedRenderer<'_> {
+    fn render(&mut self, pose: &Pose, camera: &Camera) -> Result<&RenderedModel> {
+        let template = self.shaped.as_ref().unwrap_or(self.base);
+        self.raster.render(template, pose, camera)
+    }
+
+    /// β by name: entries the record lacks keep the base template's values; a name outside
+    /// the basis is an error (a track of another model).
+    fn set_shape(&mut self, shape: &BTreeMap<String, f64>) -> Result<()> {
+        let mut beta = self.basis.template_values();
+        for (name, &v) in shape {
+            let Some(i) = self.basis.names().position(|n| n == name) else {
+                bail!("shape parameter `{name}` is not in the honline basis of the template");
+            };
+            beta[i] = v;
+        }
+        self.set_beta(&beta)
     }
 }
 
@@ -348,6 +451,70 @@ impl MethodModel for SphereMeshMethodModel {
     }
 }
 
+/// The Ch. 4 method: the sphere-mesh tracker with joint online calibration of the shape
+/// (`honline_calib`, IEKF by default), starting from the given template. Its records carry the
+/// estimated β and its certainty, and its model is rendered with each frame's estimate.
+pub struct Online;
+
+/// A starting template and its honline β basis as a [`MethodModel`].
+pub struct OnlineMethodModel {
+    /// The template calibration starts from.
+    pub template: SphereMeshTemplate,
+    /// Its honline β basis.
+    pub basis: ShapeBasis,
+}
+
+impl Method for Online {
+    fn name(&self) -> &'static str {
+        "online"
+    }
+    fn summary(&self) -> &'static str {
+        "Ch. 4 sphere-mesh tracking with online shape calibration (IEKF) from the template"
+    }
+    fn terms(&self) -> &'static [&'static str] {
+        SphereMesh.terms()
+    }
+    fn model(&self, template: &SphereMeshTemplate) -> Result<Box<dyn MethodModel>> {
+        Ok(Box::new(OnlineMethodModel {
+            basis: ShapeBasis::honline(template)?,
+            template: template.clone(),
+        }))
+    }
+}
+
+impl MethodModel for OnlineMethodModel {
+    fn skeleton(&self) -> &Skeleton {
+        &self.template.skeleton
+    }
+
+    /// `--config` is an [`OnlineConfig`] (its `tracker` field the sphere-mesh tracker's).
+    fn tracker<'a>(
+        &'a self,
+        prior: Option<&'a PcaPrior>,
+        s: &TrackSettings,
+    ) -> Result<Box<dyn FrameTracker + 'a>> {
+        let mut cfg: OnlineConfig = read_config(s.config.as_deref())?;
+        if let Some(e) = s.estimator {
+            cfg.estimator = e;
+        }
+        let tc = &mut cfg.tracker;
+        if let Some(m) = &s.m2d {
+            tc.m2d_mode = m2d_mode(m)?;
+        }
+        apply_switches!(tc, s, [d2m, m2d]);
+        Ok(Box::new(OnlineTracker::new(
+            &self.template,
+            &self.basis,
+            cfg,
+            prior,
+        )?))
+    }
+
+    fn renderer(&self) -> Box<dyn ModelRenderer + '_> {
+        Box::new(ShapedRenderer::new(&self.template, &self.basis))
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -358,18 +525,18 @@ mod tests {
             by_name("spheremesh").map(|m| m.name()).ok(),
             Some("spheremesh")
         );
-        let e = by_name("online")
+        let e = by_name("bogus")
             .err()
             .map(|e| e.to_string())
             .unwrap_or_default();
-        assert!(e.contains("online") && e.contains("cylinders"), "{e}");
+        assert!(e.contains("bogus") && e.contains("online"), "{e}");
         assert_eq!(parse_list("all").map(|l| l.len()).ok(), Some(METHODS.len()));
         assert!(parse_list("cylinders,cylinders").is_err());
         assert!(parse_list(" , ").is_err());
     }
 
     #[test]
-    fn both_models_render_the_rest_pose_in_front_of_the_camera() {
+    fn every_model_renders_the_rest_pose_in_front_of_the_camera() {
         let template = hand_model::spheremesh::default_right_hand();
         let camera = Camera::sr300_qvga();
         for m in METHODS {
@@ -387,5 +554,30 @@ mod tests {
                 m.name()
             );
         }
+    }
+
+    #[test]
+    fn the_online_renderer_follows_the_record_shape() {
+        let template = hand_model::spheremesh::default_right_hand();
+        let camera = Camera::sr300_qvga();
+        let model = Online.model(&template).expect("model");
+        let mut pose = Pose::zeros(model.skeleton());
+        pose.set(model.skeleton(), "global_tz", 400.0).expect("tz");
+        let mut r = model.renderer();
+        let base = r.render(&pose, &camera).expect("render").pixels.len();
+        let mut shape = BTreeMap::new();
+        for f in ["index", "middle", "ring", "pinky"] {
+            for p in ["bottom", "middle", "top"] {
+                shape.insert(format!("{f}_{p}_length"), 40.0);
+            }
+        }
+        r.set_shape(&shape).expect("shape");
+        let longer = r.render(&pose, &camera).expect("render").pixels.len();
+        assert!(longer > base + 100, "{base} → {longer}");
+        shape.insert("no_such_parameter".into(), 1.0);
+        assert!(r.set_shape(&shape).is_err());
+        shape.clear();
+        shape.insert("index_top_radius".into(), f64::NAN);
+        assert!(r.set_shape(&shape).is_err());
     }
 }

@@ -11,6 +11,7 @@ use eval::markers::{frame_error, median};
 use hand_model::cylinder::{default_right_hand_cylinders, CylinderModel};
 use hand_model::solver::PcaPrior;
 use hand_model::spheremesh::SphereMeshTemplate;
+use honline_calib::Estimator;
 use sensor_io::io::{open_sequence, write_atomic, McapWriter, SequenceWriter, TRACK_TOPIC};
 use sensor_io::preprocess::{
     DepthOnlyParams, PreprocessConfig, PreprocessedFrame, Preprocessor, Segmentation,
@@ -35,6 +36,12 @@ pub struct TrackArgs {
     /// subject) — the last two give the cylinders fitted to that sphere-mesh.
     #[arg(long, default_value = "cylinders")]
     pub model: String,
+    /// Online calibration of the sphere-mesh model while tracking (thesis Ch. 4):
+    /// `online` (the joint cumulative IEKF), `online=iekf`, `online=kf` (split cumulative) or
+    /// `online=per-frame`; with `--model spheremesh` (or `online`), starting from `--template`.
+    /// The records carry the estimated β (`shape`) and its certainty (`shape_certainty`).
+    #[arg(long, value_parser = parse_calibrate, value_name = "online[=iekf|kf|per-frame]")]
+    pub calibrate: Option<Estimator>,
     /// The subject's sphere-mesh template when `--model` is a method name (`spheremesh`,
     /// `cylinders`: the cylinders are fitted to it): a template `.json` or `subject:<name>`
     /// (default: the default hand).
@@ -106,6 +113,17 @@ pub struct TrackArgs {
     pub no_temporal: bool,
 }
 
+/// `--calibrate`: `online` or `online=<estimator>`.
+fn parse_calibrate(value: &str) -> Result<Estimator, String> {
+    match value.split_once('=') {
+        None if value == "online" => Ok(Estimator::Iekf),
+        Some(("online", e)) => e.parse(),
+        _ => Err(format!(
+            "unknown calibration `{value}`: use online, online=iekf, online=kf or online=per-frame"
+        )),
+    }
+}
+
 /// The `--no-<term>` switches and the energy term each disables.
 fn disabled_terms(args: &TrackArgs) -> Vec<(&'static str, &'static str)> {
     [
@@ -148,6 +166,7 @@ fn settings(args: &TrackArgs, method: &dyn Method) -> Result<TrackSettings> {
         rigid_first: !args.no_rigid_first,
         disabled,
         m2d: args.m2d.clone(),
+        estimator: args.calibrate,
     })
 }
 
@@ -246,7 +265,14 @@ pub fn run(args: TrackArgs) -> Result<()> {
         );
     }
     let prior = load_prior(&args.prior)?;
-    let (method, model) = load_model(&args.model, args.template.as_deref())?;
+    let model_name = match (args.calibrate, args.model.as_str()) {
+        (None, name) => name,
+        (Some(_), "spheremesh" | "online") => "online",
+        (Some(_), other) => bail!(
+            "--calibrate calibrates the sphere-mesh model: use it with --model spheremesh, not --model {other}"
+        ),
+    };
+    let (method, model) = load_model(model_name, args.template.as_deref())?;
     let settings = settings(&args, method)?;
     let mut tracker = model.tracker(prior.as_ref(), &settings)?;
     track_sequence(&args, tracker.as_mut())
@@ -415,6 +441,9 @@ fn track_sequence(args: &TrackArgs, tracker: &mut dyn FrameTracker) -> Result<()
     if !flags.is_empty() {
         let f: Vec<String> = flags.iter().map(|(k, v)| format!("{k} {v}")).collect();
         eprintln!("flagged frames: {}", f.join(", "));
+    }
+    for line in tracker.summary() {
+        eprintln!("{line}");
     }
     if !errors.is_empty() {
         let n = errors.len() as f64;

@@ -77,6 +77,7 @@ fn demo_runs_on_the_embedded_default() {
         "teaser-sheet.png",
         "track-cylinders.jsonl",
         "track-spheremesh.jsonl",
+        "track-online.jsonl",
         "metrics.json",
         "README.md",
         "error-under.svg",
@@ -88,7 +89,7 @@ fn demo_runs_on_the_embedded_default() {
         serde_json::from_str(&std::fs::read_to_string(d.join("metrics.json")).expect("json"))
             .expect("metrics.json");
     let methods = m["methods"].as_array().expect("methods");
-    assert_eq!(methods.len(), 2);
+    assert_eq!(methods.len(), 3);
     for meth in methods {
         assert!(meth["markers"]["mean_mm"].as_f64().expect("marker mean") < 30.0);
         assert!(meth["e_d2m_mm"]["mean"].as_f64().expect("d2m") > 0.0);
@@ -134,11 +135,11 @@ fn compare_and_eval_score_methods_on_one_sequence() {
             "compare",
             &s(&seq),
             "--methods",
-            "cylinders,online",
+            "cylinders,bogus",
             "--out",
             &s(&report),
         ],
-        "online",
+        "bogus",
     );
 
     let track = d.join("track.jsonl");
@@ -789,4 +790,112 @@ fn calibrate_writes_a_template_the_tracker_reads() {
         &["calibrate", &s(&seq), "--out", &s(&d.join("x.txt"))],
         ".json",
     );
+}
+
+/// Issue 8: `hands track --calibrate online` on a random subject writes β and its certainty
+/// per frame and prints the final shape; bad `--calibrate` values fail clearly; `compare` runs
+/// the `online` method and `eval` renders its track with the recorded shapes.
+#[test]
+fn track_calibrate_online_writes_the_shape_per_frame() {
+    let d = tmp("online");
+    let s = |p: &PathBuf| p.to_str().expect("utf8").to_string();
+    let seq = d.join("seq");
+    let (ok, text) = hands(&[
+        "synth",
+        "--motion",
+        "calibration",
+        "--subject",
+        "random",
+        "--frames",
+        "40",
+        "--out",
+        &s(&seq),
+    ]);
+    assert!(ok, "{text}");
+    let track = d.join("track.jsonl");
+    let (ok, text) = hands(&[
+        "track",
+        &s(&seq),
+        "--model",
+        "spheremesh",
+        "--calibrate",
+        "online",
+        "--out",
+        &s(&track),
+    ]);
+    assert!(ok, "{text}");
+    assert!(
+        text.contains("online calibration (iekf), 40 frames")
+            && text.contains("largest changes vs the template")
+            && text.contains("least certain"),
+        "{text}"
+    );
+    let recs = read_records(&track);
+    assert_eq!(recs.len(), 40);
+    for r in &recs {
+        let shape = r["shape"].as_object().expect("shape");
+        let cert = r["shape_certainty"].as_object().expect("certainty");
+        assert_eq!(shape.len(), 75, "{r}");
+        assert_eq!(cert.len(), 75);
+        assert!(shape
+            .values()
+            .chain(cert.values())
+            .all(|v| v.as_f64().is_some_and(f64::is_finite)));
+        assert!(cert.values().all(|v| v.as_f64().is_some_and(|c| c >= 0.0)));
+    }
+    // The certainty of an observed length grows over the sequence.
+    let c = |r: &serde_json::Value| r["shape_certainty"]["index_bottom_length"].as_f64();
+    assert!(
+        c(&recs[39]) > c(&recs[0]),
+        "{:?} {:?}",
+        c(&recs[0]),
+        c(&recs[39])
+    );
+
+    let out = s(&d.join("t.jsonl"));
+    let seq_s = s(&seq);
+    for (args, needle) in [
+        (
+            vec!["--model", "spheremesh", "--calibrate", "online=ukf"],
+            "ukf",
+        ),
+        (
+            vec!["--model", "spheremesh", "--calibrate", "offline"],
+            "online=per-frame",
+        ),
+        (
+            vec!["--model", "cylinders", "--calibrate", "online"],
+            "--model spheremesh",
+        ),
+    ] {
+        let mut all = vec!["track", seq_s.as_str(), "--out", out.as_str()];
+        all.extend(&args);
+        assert_fails_clearly(&all, needle);
+    }
+
+    let report = d.join("report");
+    let (ok, text) = hands(&[
+        "compare",
+        &s(&seq),
+        "--methods",
+        "spheremesh,online",
+        "--frames",
+        "10",
+        "--out",
+        &s(&report),
+    ]);
+    assert!(ok, "{text}");
+    assert!(text.contains("| online |"), "{text}");
+    let ev = d.join("eval");
+    let (ok, text) = hands(&[
+        "eval",
+        &s(&track),
+        "--sequence",
+        &s(&seq),
+        "--model",
+        "online",
+        "--out",
+        &s(&ev),
+    ]);
+    assert!(ok, "{text}");
 }
