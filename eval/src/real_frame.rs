@@ -24,9 +24,8 @@ use std::time::Instant;
 
 use datasets::nyu::{NyuJoints, NYU_JOINTS};
 use hand_model::kinematics::Pose;
-use hand_model::math::matrix_to_euler_xyz;
 use hand_model::spheremesh::{Attachment, PosedSphereMesh, ShapeBasis, SphereMeshTemplate};
-use hmodel_spheremesh::calibration::{calibrate, Calibration, CalibrationConfig, CalibrationFrame};
+use hmodel_spheremesh::calibration::{calibrate, place_pose, CalibrationConfig, CalibrationFrame};
 use nalgebra::{Matrix3, Vector3};
 use sensor_io::preprocess::{PreprocessConfig, PreprocessedFrame, Preprocessor};
 use sensor_io::{Camera, DepthImage, Frame};
@@ -113,43 +112,6 @@ fn upright(palm_toward_camera: bool) -> Matrix3<f64> {
     }
 }
 
-/// Set the six global DOFs of `pose` so that the model is turned by `r` (model → camera) and the
-/// centroid of the template's *rest* sphere centers lands on `target` (camera frame, mm); the
-/// articulation of `pose` is kept.
-pub fn place_pose(
-    template: &SphereMeshTemplate,
-    pose: &mut Pose,
-    r: &Matrix3<f64>,
-    target: &Vector3<f64>,
-) {
-    let sk = &template.skeleton;
-    let rest = PosedSphereMesh::new(template, &Pose::zeros(sk));
-    let c = rest.spheres.iter().map(|s| s.center).sum::<Vector3<f64>>() / rest.spheres.len() as f64;
-    let t = target - r * c;
-    let [a, b, g] = matrix_to_euler_xyz(r);
-    for (name, v) in [
-        ("global_rx", a),
-        ("global_ry", b),
-        ("global_rz", g),
-        ("global_tx", t.x),
-        ("global_ty", t.y),
-        ("global_tz", t.z),
-    ] {
-        // Every template has the six global DOFs.
-        let _ = pose.set(sk, name, v);
-    }
-}
-
-/// The lowest energy a calibration reached: its initial energy or that of an accepted step.
-pub fn best_energy(calibration: &Calibration) -> f64 {
-    calibration
-        .iterations
-        .iter()
-        .filter(|r| r.accepted)
-        .map(|r| r.energy)
-        .fold(calibration.initial_energy, f64::min)
-}
-
 /// Fit `base` to one depth frame (see the module docs). Refused: a frame whose size differs from
 /// the camera's, a frame where no hand is segmented (fewer than 50 points), a base template
 /// without the honline shape basis.
@@ -204,7 +166,7 @@ pub fn fit_depth_frame(
             });
             let fit = calibrate(&template, std::slice::from_ref(&data), &[init], &cal)
                 .map_err(|e| EvalError::arg("fit", e.to_string()))?;
-            let energy = best_energy(&fit);
+            let energy = fit.best_energy();
             let pose = fit.poses[0].clone();
             let keypoints = PosedSphereMesh::new(&template, &pose)
                 .keypoints(&template)

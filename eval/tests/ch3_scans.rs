@@ -10,76 +10,16 @@ use datasets::scans::{
     match_sphere_names, principal_extents, read_obj_points, scale_from_extents,
     sphere_principal_extents, FittedReference,
 };
-use eval::real_frame::{best_energy, place_pose};
 use hand_model::kinematics::Pose;
 use hand_model::math::fit_similarity;
 use hand_model::query::SphereMeshGeometry;
 use hand_model::spheremesh::{default_right_hand, PosedSphereMesh, SphereMeshTemplate};
-use hmodel_spheremesh::calibration::{calibrate, CalibrationConfig, CalibrationFrame};
-use nalgebra::{Matrix3, SymmetricEigen, Vector3};
+use hmodel_spheremesh::calibration::{
+    calibrate, initialize_clouds, split_forearm, CalibrationConfig, CloudSearch,
+};
+use nalgebra::Vector3;
 
 const ROOT: &str = "../../shared/reference/hand-scans-tkach";
-
-/// Centroid and principal axes (columns, largest spread first) of a point set.
-fn frame_of(points: &[Vector3<f64>]) -> (Vector3<f64>, Matrix3<f64>) {
-    let n = points.len() as f64;
-    let c = points.iter().sum::<Vector3<f64>>() / n;
-    let mut cov = Matrix3::zeros();
-    for p in points {
-        cov += (p - c) * (p - c).transpose();
-    }
-    let eig = SymmetricEigen::new(cov);
-    let mut order = [0usize, 1, 2];
-    order.sort_by(|&a, &b| eig.eigenvalues[b].total_cmp(&eig.eigenvalues[a]));
-    let axes = Matrix3::from_columns(&order.map(|i| eig.eigenvectors.column(i).into_owned()));
-    (c, axes)
-}
-
-/// Initial pose of one scan (mm): the template's rest principal frame turned onto the scan's
-/// (every axis assignment and sign giving a proper rotation), flat, half-bent or curled fingers;
-/// each solved for the pose alone, the
-/// one with the lowest energy kept.
-fn initial_pose(base: &SphereMeshTemplate, frame: &CalibrationFrame) -> (Pose, f64) {
-    let sk = &base.skeleton;
-    let rest = PosedSphereMesh::new(base, &Pose::zeros(sk));
-    let centers: Vec<Vector3<f64>> = rest.spheres.iter().map(|s| s.center).collect();
-    let (_, at) = frame_of(&centers);
-    let (cs, as_) = frame_of(&frame.points);
-    let config = CalibrationConfig {
-        fit_shape: false,
-        iterations: 15,
-        ..CalibrationConfig::default()
-    };
-    let mut best: Option<(Pose, f64)> = None;
-    for signs in [
-        [1.0, 1.0, 1.0],
-        [1.0, -1.0, -1.0],
-        [-1.0, 1.0, -1.0],
-        [-1.0, -1.0, 1.0],
-    ] {
-        let flip = Matrix3::from_diagonal(&Vector3::from(signs));
-        let mut r = as_ * flip * at.transpose();
-        if r.determinant() < 0.0 {
-            r = -r;
-        }
-        for bend in [0.0, 0.5] {
-            let mut p = Pose::zeros(sk);
-            for d in sk.dofs() {
-                if d.name.contains("flex") && !d.name.starts_with("global") {
-                    p.set(sk, &d.name, bend).unwrap();
-                }
-            }
-            p.clamp_to_limits(sk);
-            place_pose(base, &mut p, &r, &cs);
-            let fit = calibrate(base, std::slice::from_ref(frame), &[p], &config).unwrap();
-            let e = best_energy(&fit);
-            if best.as_ref().is_none_or(|(_, b)| e < *b) {
-                best = Some((fit.poses[0].clone(), e));
-            }
-        }
-    }
-    best.expect("hypotheses")
-}
 
 /// Mean unsigned distance (mm) from `points` to the model surface.
 fn d2m(geometry: &SphereMeshGeometry, points: &[Vector3<f64>]) -> f64 {
@@ -107,62 +47,68 @@ fn calibrates_to_the_real_scans_like_the_authors() {
     let template_extents = sphere_principal_extents(&rest.spheres).unwrap();
     let mut units: Vec<f64> = scans
         .iter()
-        .map(|s| scale_from_extents(&principal_extents(s).unwrap(), &template_extents).unwrap())
+        .map(|s| {
+            let hand = split_forearm(s).unwrap().hand;
+            scale_from_extents(&principal_extents(&hand).unwrap(), &template_extents).unwrap()
+        })
         .collect();
     units.sort_by(f64::total_cmp);
     let units_per_mm = units[units.len() / 2];
-    let frames: Vec<CalibrationFrame> = scans
+    let mm: Vec<Vec<Vector3<f64>>> = scans
         .iter()
-        .map(|s| CalibrationFrame::cloud(s.iter().map(|p| p / units_per_mm).collect()))
+        .map(|s| s.iter().map(|p| p / units_per_mm).collect())
         .collect();
-    // Handedness by fit: the scanned hand is whichever of the default hand and its mirror
-    // image explains the scans better at the initialization.
-    let left = right.mirrored().unwrap();
-    let fit = |t: &SphereMeshTemplate| -> Vec<(Pose, f64)> {
-        frames.iter().map(|f| initial_pose(t, f)).collect()
-    };
-    let total = |v: &[(Pose, f64)]| v.iter().map(|(_, e)| e).sum::<f64>();
-    let (fit_right, fit_left) = (fit(&right), fit(&left));
+    let init = initialize_clouds(&right, &mm, &CloudSearch::default()).unwrap();
     println!(
-        "initialization energy: right hand {:.0}, left hand {:.0}",
-        total(&fit_right),
-        total(&fit_left)
+        "initialization: {} hand (hypothesis energy {:.0} vs {:.0}); points kept after the forearm cut {:?} of {:?}",
+        if init.mirrored { "left" } else { "right" },
+        init.energies[0],
+        init.energies[1],
+        init.frames.iter().map(|f| f.points.len()).collect::<Vec<_>>(),
+        scans.iter().map(Vec::len).collect::<Vec<_>>()
     );
-    let (base, inits) = if total(&fit_left) < total(&fit_right) {
-        (left, fit_left)
-    } else {
-        (right, fit_right)
-    };
-    let poses: Vec<Pose> = inits.iter().map(|(p, _)| p.clone()).collect();
+    let (base, frames) = (init.template.clone(), init.frames.clone());
+    let poses: Vec<Pose> = init.poses.iter().map(|p| p.pose.clone()).collect();
     let cal = calibrate(&base, &frames, &poses, &CalibrationConfig::default()).unwrap();
 
     // Our residual on each scan, and the authors' (their per-pose centers with their final
     // radii, in their unit: 0.02806 scan units per mm from their pill lengths).
     let reference = FittedReference::load(root.join("fitted")).unwrap();
-    // mm of our scale → scan units → the authors' mm.
-    let residual = |t: &SphereMeshTemplate, poses: &[Pose]| -> Vec<f64> {
-        frames
+    // Distances in the authors' mm: ours are in our mm (scan units / units_per_mm), theirs in
+    // scan units (their per-pose centers, their radii × 0.02806).
+    let ours_on = |t: &SphereMeshTemplate, poses: &[Pose], clouds: &[Vec<Vector3<f64>>]| {
+        clouds
             .iter()
             .zip(poses)
-            .map(|(frame, pose)| {
+            .map(|(cloud, pose)| {
                 let posed = PosedSphereMesh::new(t, pose);
                 let elements: Vec<_> = t.elements.iter().map(|e| e.element).collect();
                 let g = SphereMeshGeometry::new(&posed.spheres, &elements).unwrap();
-                d2m(&g, &frame.points) * units_per_mm / 0.02806
+                d2m(&g, cloud) * units_per_mm / 0.02806
             })
-            .collect()
+            .collect::<Vec<f64>>()
     };
-    let ours = residual(&cal.template, &cal.poses);
-    let initial = residual(&base, &poses);
-    let theirs: Vec<f64> = reference
-        .per_pose_centers
+    let theirs_on = |clouds: &[Vec<Vector3<f64>>]| {
+        reference
+            .per_pose_centers
+            .iter()
+            .zip(clouds)
+            .map(|(centers, cloud)| {
+                let g = reference.geometry(centers, 0.02806).unwrap();
+                d2m(&g, cloud) / 0.02806
+            })
+            .collect::<Vec<f64>>()
+    };
+    let hand: Vec<Vec<Vector3<f64>>> = frames.iter().map(|f| f.points.clone()).collect();
+    let hand_units: Vec<Vec<Vector3<f64>>> = hand
         .iter()
-        .zip(&scans)
-        .map(|(centers, scan)| {
-            let g = reference.geometry(centers, 0.02806).unwrap();
-            d2m(&g, scan) / 0.02806
-        })
+        .map(|c| c.iter().map(|p| p * units_per_mm).collect())
         .collect();
+    let ours = ours_on(&cal.template, &cal.poses, &hand);
+    let initial = ours_on(&base, &poses, &hand);
+    let theirs = theirs_on(&hand_units);
+    let ours_full = ours_on(&cal.template, &cal.poses, &mm);
+    let theirs_full = theirs_on(&scans);
 
     // Rest centers and radii vs the authors' final model (mm), similarity-aligned over the
     // spheres both models name.
@@ -206,13 +152,16 @@ fn calibrates_to_the_real_scans_like_the_authors() {
         .sum::<f64>()
         / n;
     println!(
-        "scans: {units_per_mm:.5} units/mm estimated (authors 0.02806); init energies {:?}; calibration {:.2} s, {} iterations",
-        inits.iter().map(|(_, e)| e.round()).collect::<Vec<_>>(),
+        "scans: {units_per_mm:.5} units/mm estimated (authors 0.02806); hypothesis energies {:?}; calibration {:.2} s, {} iterations",
+        init.poses.iter().map(|p| p.energy.round()).collect::<Vec<_>>(),
         cal.seconds,
         cal.iterations.len()
     );
     println!(
-        "d2m on the scans (mm): ours {ours:.2?} (initial {initial:.2?}), authors {theirs:.2?}"
+        "d2m on the scans without forearm (mm): ours {ours:.2?} (initial {initial:.2?}), authors {theirs:.2?}"
+    );
+    println!(
+        "d2m on the whole scans, forearm included (mm): ours {ours_full:.2?}, authors {theirs_full:.2?}"
     );
     // Posed centers per scan vs the authors' per-pose centers (each in its scan's frame and
     // units): a similarity per pose, distances converted to the authors' mm.

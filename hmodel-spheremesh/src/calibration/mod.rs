@@ -1,14 +1,19 @@
 //! Offline multi-frame calibration of the sphere-mesh template (thesis §3.4): the shape
 //! unknowns and their Jacobians ([`ShapeSpace`]) and the joint LM over all frames
-//! ([`calibrate`]); the per-frame data rows over pose and shape ([`ShapeRows`]) that the
+//! ([`calibrate`]) and its initialization from complete scans ([`initialize_clouds`]); the per-frame data rows over pose and shape ([`ShapeRows`]) that the
 //! online calibration of `honline-calib` reuses.
 
 mod block;
+mod cloud;
 mod rows;
 mod select;
 mod shape;
 mod solve;
 
+pub use cloud::{
+    initialize_cloud_pose, initialize_clouds, place_pose, principal_frame, split_forearm,
+    CloudInit, CloudPose, CloudSearch, ForearmSplit,
+};
 pub use rows::{DataEnergy, DataWeights, RowLayout, ShapeRows};
 pub use select::select_frames;
 

@@ -226,6 +226,15 @@ pub struct Calibration {
 }
 
 impl Calibration {
+    /// The lowest energy reached: the initial one or that of an accepted step.
+    pub fn best_energy(&self) -> f64 {
+        self.iterations
+            .iter()
+            .filter(|r| r.accepted)
+            .map(|r| r.energy)
+            .fold(self.initial_energy, f64::min)
+    }
+
     /// The shape unknowns the data barely constrains: information below `fraction` of the
     /// median over unknowns of the same kind (β, rotations, free offsets), e.g. the phalanx
     /// lengths of fingers that stayed straight in every frame. Their values stay near the

@@ -1,0 +1,361 @@
+//! Initialization of a calibration from complete point clouds (thesis §3.4, the multi-view
+//! case: photogrammetry or multi-camera scans of the hand in a few poses).
+//!
+//! A scan comes in an unknown orientation and unit, often with the forearm, and the thesis
+//! initializes its poses by hand. Here:
+//! - [`split_forearm`]: the forearm is cut off at the wrist, found on the scan's cross-section
+//!   profile along its long axis (the hand model does not describe the forearm; a depth
+//!   sensor's wristband segmentation does the same, thesis §2.3);
+//! - [`initialize_cloud_pose`]: a pose hypothesis search on the hand part — the template's
+//!   wrist-to-fingers axis laid along the scan's long axis toward the fingers, turned about it
+//!   in even steps, fingers flat, half bent or curled, thumb adducted or abducted; each hypothesis fitted for the pose alone on
+//!   a small subsample with a Huber d2m, the best few refined on a larger one, the lowest energy
+//!   kept;
+//! - [`initialize_clouds`]: both on every scan, for the template and its mirror image; the hand
+//!   whose hypotheses explain the scans better is the scanned one.
+//!
+//! [`calibrate`] then fits shape and poses jointly on the hand parts.
+
+use hand_model::kinematics::Pose;
+use hand_model::math::matrix_to_euler_xyz;
+use hand_model::spheremesh::{PosedSphereMesh, SphereMeshTemplate};
+use nalgebra::{Matrix3, SymmetricEigen, Vector3};
+
+use super::solve::{calibrate, CalibrationConfig, CalibrationError, CalibrationFrame};
+
+/// Settings of the pose hypothesis search.
+#[derive(Clone, Debug, PartialEq)]
+pub struct CloudSearch {
+    /// Points of the scan the best hypotheses are refined on (an even subsample; the coarse
+    /// pass uses half as many).
+    pub sample: usize,
+    /// LM iterations of a refinement (the coarse pass runs half as many).
+    pub iterations: usize,
+    /// Turns about the scan's long axis tried per direction of the fingers along it.
+    pub rolls: usize,
+    /// Hypotheses of the coarse pass refined.
+    pub refine: usize,
+    /// Finger flexions (rad, every non-global `flex` DOF, clamped to its limits).
+    pub bends: Vec<f64>,
+    /// Thumb abductions (rad, `thumb_cmc_abd`).
+    pub thumb_abduction: Vec<f64>,
+    /// Huber threshold (mm) of the d2m during the search.
+    pub robust: f64,
+}
+
+impl Default for CloudSearch {
+    fn default() -> Self {
+        Self {
+            sample: 1000,
+            iterations: 14,
+            rolls: 8,
+            refine: 4,
+            bends: vec![0.0, 0.6, 1.2],
+            thumb_abduction: vec![-0.4, 0.0, 0.7],
+            robust: 3.0,
+        }
+    }
+}
+
+/// The pose chosen for one scan.
+#[derive(Clone, Debug)]
+pub struct CloudPose {
+    /// The fitted pose.
+    pub pose: Pose,
+    /// Its energy on the subsample (d2m, Huber).
+    pub energy: f64,
+}
+
+/// The initialization of a multi-scan calibration.
+#[derive(Clone, Debug)]
+pub struct CloudInit {
+    /// The template of the scanned hand (the given one or its mirror image), scaled
+    /// anisotropically to the scans.
+    pub template: SphereMeshTemplate,
+    /// Whether the mirror image was chosen.
+    pub mirrored: bool,
+    /// Per scan its pose.
+    pub poses: Vec<CloudPose>,
+    /// Per scan its hand part ([`split_forearm`]), as a calibration frame.
+    pub frames: Vec<CalibrationFrame>,
+    /// Sum of the hypothesis energies of the chosen hand and of the other one.
+    pub energies: [f64; 2],
+}
+
+/// Centroid and principal axes (columns, largest spread first) of a point set, with the
+/// standard deviation along each axis; `None` for fewer than 3 points.
+pub fn principal_frame(
+    points: &[Vector3<f64>],
+) -> Option<(Vector3<f64>, Matrix3<f64>, Vector3<f64>)> {
+    if points.len() < 3 {
+        return None;
+    }
+    let n = points.len() as f64;
+    let c = points.iter().sum::<Vector3<f64>>() / n;
+    let cov = points
+        .iter()
+        .map(|p| (p - c) * (p - c).transpose())
+        .sum::<Matrix3<f64>>()
+        / n;
+    let eig = SymmetricEigen::new(cov);
+    let mut order = [0usize, 1, 2];
+    order.sort_by(|&a, &b| eig.eigenvalues[b].total_cmp(&eig.eigenvalues[a]));
+    let axes = Matrix3::from_columns(&order.map(|i| eig.eigenvectors.column(i).into_owned()));
+    let spread = Vector3::from(order.map(|i| eig.eigenvalues[i].max(0.0).sqrt()));
+    Some((c, axes, spread))
+}
+
+/// Set the six global DOFs of `pose` so that the model is turned by `r` (model → data frame)
+/// and the centroid of the template's *rest* sphere centers lands on `target`; the
+/// articulation of `pose` is kept.
+pub fn place_pose(
+    template: &SphereMeshTemplate,
+    pose: &mut Pose,
+    r: &Matrix3<f64>,
+    target: &Vector3<f64>,
+) {
+    let sk = &template.skeleton;
+    let rest = PosedSphereMesh::new(template, &Pose::zeros(sk));
+    let c = rest.spheres.iter().map(|s| s.center).sum::<Vector3<f64>>() / rest.spheres.len() as f64;
+    let t = target - r * c;
+    let [a, b, g] = matrix_to_euler_xyz(r);
+    for (name, v) in [
+        ("global_rx", a),
+        ("global_ry", b),
+        ("global_rz", g),
+        ("global_tx", t.x),
+        ("global_ty", t.y),
+        ("global_tz", t.z),
+    ] {
+        // Every template has the six global DOFs.
+        let _ = pose.set(sk, name, v);
+    }
+}
+
+/// The pose with every finger `flex` DOF at `bend` and `thumb_cmc_abd` at `thumb` (clamped to
+/// the joint limits).
+fn bent(template: &SphereMeshTemplate, bend: f64, thumb: f64) -> Pose {
+    let sk = &template.skeleton;
+    let mut p = Pose::zeros(sk);
+    for d in sk.dofs() {
+        if d.name.contains("flex") && !d.name.starts_with("global") {
+            // The name comes from the skeleton itself.
+            let _ = p.set(sk, &d.name, bend);
+        }
+    }
+    // A template without the DOF keeps its thumb.
+    let _ = p.set(sk, "thumb_cmc_abd", thumb);
+    p.clamp_to_limits(sk);
+    p
+}
+
+/// Every `k`-th point, about `n` of them.
+fn subsample(points: &[Vector3<f64>], n: usize) -> Vec<Vector3<f64>> {
+    let step = (points.len() / n.max(1)).max(1);
+    points.iter().step_by(step).copied().collect()
+}
+
+/// A scan split at the wrist ([`split_forearm`]).
+#[derive(Clone, Debug)]
+pub struct ForearmSplit {
+    /// The points of the hand side (with a stretch of forearm as long as the template's wrist
+    /// segment).
+    pub hand: Vec<Vector3<f64>>,
+    /// Points removed as forearm.
+    pub removed: usize,
+    /// Unit vector along the scan's long axis, from the wrist toward the fingers.
+    pub toward_fingers: Vector3<f64>,
+}
+
+/// Bins of the cross-section profile along the long axis.
+const PROFILE_BINS: usize = 48;
+
+/// Cut the forearm off a complete scan of a hand, from the scan's shape alone (no model, any
+/// unit). Along the long axis, the cross-section radius (RMS distance of a slice's points to
+/// the slice's centroid, 48 slices) is a forearm's plateau at one end and the hand's wider
+/// profile at the other: the end whose slices are narrower on average is the forearm's. Walking
+/// from the widest slice toward it, the wrist is the first slice within 10 % of the forearm's
+/// radius; points beyond the wrist by more than 0.2 × the wrist-to-hand-end length (the
+/// template's wrist segment reaches 46 mm below the crease, about 0.2 of a hand's length) are
+/// removed. A scan whose profile never narrows to the forearm's radius keeps all its points.
+pub fn split_forearm(points: &[Vector3<f64>]) -> Option<ForearmSplit> {
+    let (c, axes, _) = principal_frame(points)?;
+    let a0: Vector3<f64> = axes.column(0).into_owned();
+    let t: Vec<f64> = points.iter().map(|p| (p - c).dot(&a0)).collect();
+    let (lo, hi) = t
+        .iter()
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), &x| {
+            (l.min(x), h.max(x))
+        });
+    let width = (hi - lo) / PROFILE_BINS as f64;
+    if !(width > 0.0) {
+        return None;
+    }
+    let bin = |x: f64| (((x - lo) / width) as usize).min(PROFILE_BINS - 1);
+    let mut sums = [(0usize, Vector3::zeros()); PROFILE_BINS];
+    for (p, &x) in points.iter().zip(&t) {
+        let b = &mut sums[bin(x)];
+        b.0 += 1;
+        b.1 += p;
+    }
+    let mut spread = [0.0; PROFILE_BINS];
+    for (p, &x) in points.iter().zip(&t) {
+        let (n, sum) = sums[bin(x)];
+        let d = p - sum / n as f64;
+        spread[bin(x)] += (d - a0 * d.dot(&a0)).norm_squared() / n as f64;
+    }
+    // Three-bin moving average of the RMS radius.
+    let radius: Vec<f64> = (0..PROFILE_BINS)
+        .map(|k| {
+            let r = k.saturating_sub(1)..(k + 2).min(PROFILE_BINS);
+            let n = r.len() as f64;
+            r.map(|j| spread[j].sqrt()).sum::<f64>() / n
+        })
+        .collect();
+    // The forearm's end is the narrower one (slices 3..15 from each end: past a scan's
+    // rounded edge, short of the palm).
+    let end_mean = |bins: &mut dyn Iterator<Item = usize>| {
+        let v: Vec<f64> = bins.map(|k| radius[k]).collect();
+        v.iter().sum::<f64>() / v.len() as f64
+    };
+    let low = end_mean(&mut (3..15));
+    let high = end_mean(&mut (PROFILE_BINS - 15..PROFILE_BINS - 3));
+    let forearm_low = low < high;
+    let forearm = low.min(high);
+    let toward_fingers = if forearm_low { a0 } else { -a0 };
+    let widest = (0..PROFILE_BINS).max_by(|&a, &b| radius[a].total_cmp(&radius[b]))?;
+    let mut walk: Box<dyn Iterator<Item = usize>> = if forearm_low {
+        Box::new((0..widest).rev())
+    } else {
+        Box::new(widest + 1..PROFILE_BINS)
+    };
+    let Some(wrist) = walk.find(|&k| radius[k] <= 1.1 * forearm) else {
+        return Some(ForearmSplit {
+            hand: points.to_vec(),
+            removed: 0,
+            toward_fingers,
+        });
+    };
+    let tw = lo + (wrist as f64 + 0.5) * width;
+    let (hand_end, sign) = if forearm_low { (hi, -1.0) } else { (lo, 1.0) };
+    let cut = tw + sign * 0.2 * (tw - hand_end).abs();
+    let hand: Vec<Vector3<f64>> = points
+        .iter()
+        .zip(&t)
+        .filter(|(_, &x)| sign * (x - cut) <= 0.0)
+        .map(|(p, _)| *p)
+        .collect();
+    Some(ForearmSplit {
+        removed: points.len() - hand.len(),
+        hand,
+        toward_fingers,
+    })
+}
+
+/// The pose of `base` that best explains one complete scan (see the module docs). Errors: a
+/// scan of fewer than 50 points or with a non-finite point, a template the calibration cannot
+/// pose.
+pub fn initialize_cloud_pose(
+    base: &SphereMeshTemplate,
+    points: &[Vector3<f64>],
+    search: &CloudSearch,
+) -> Result<CloudPose, CalibrationError> {
+    let split = split_forearm(points)
+        .ok_or_else(|| CalibrationError::Input("a scan has fewer than 3 distinct points".into()))?;
+    let coarse = CalibrationFrame::cloud(subsample(&split.hand, search.sample / 2));
+    let fine = CalibrationFrame::cloud(subsample(&split.hand, search.sample));
+    let Some((c, axes, _)) = principal_frame(&fine.points) else {
+        return Err(CalibrationError::Input(
+            "a scan has fewer than 3 points".into(),
+        ));
+    };
+    let config = |iterations| CalibrationConfig {
+        fit_shape: false,
+        iterations,
+        robust: search.robust,
+        ..CalibrationConfig::default()
+    };
+    let fit = |frame: &CalibrationFrame, pose: Pose, iterations| {
+        calibrate(
+            base,
+            std::slice::from_ref(frame),
+            &[pose],
+            &config(iterations),
+        )
+        .map(|f| (f.best_energy(), f.poses[0].clone()))
+    };
+    let mut coarse_fits: Vec<(f64, Pose)> = Vec::new();
+    let y = split.toward_fingers;
+    {
+        let side = axes.column(1) - y * y.dot(&axes.column(1));
+        let e1 = side
+            .try_normalize(1e-9)
+            .unwrap_or_else(|| y.cross(&Vector3::x()).normalize());
+        let e2 = y.cross(&e1);
+        for roll in 0..search.rolls {
+            let phi = roll as f64 * std::f64::consts::TAU / search.rolls as f64;
+            let x = e1 * phi.cos() + e2 * phi.sin();
+            let r = Matrix3::from_columns(&[x, y, x.cross(&y)]);
+            for &bend in &search.bends {
+                for &thumb in &search.thumb_abduction {
+                    let mut pose = bent(base, bend, thumb);
+                    place_pose(base, &mut pose, &r, &c);
+                    coarse_fits.push(fit(&coarse, pose, search.iterations / 2)?);
+                }
+            }
+        }
+    }
+    coarse_fits.sort_by(|a, b| a.0.total_cmp(&b.0));
+    let mut best: Option<CloudPose> = None;
+    for (_, pose) in coarse_fits.into_iter().take(search.refine) {
+        let (energy, pose) = fit(&fine, pose, search.iterations)?;
+        if best.as_ref().is_none_or(|b| energy < b.energy) {
+            best = Some(CloudPose { pose, energy });
+        }
+    }
+    // At least one rotation, shift and bend was tried.
+    best.ok_or_else(|| CalibrationError::Input("no pose hypothesis (empty search)".into()))
+}
+
+/// Forearm removal, handedness and poses for a calibration from complete scans (see the
+/// module docs); the scans must be in millimetres. Errors: no scan, a scan that
+/// [`initialize_cloud_pose`] refuses, a template without a mirror image.
+pub fn initialize_clouds(
+    base: &SphereMeshTemplate,
+    scans: &[Vec<Vector3<f64>>],
+    search: &CloudSearch,
+) -> Result<CloudInit, CalibrationError> {
+    if scans.is_empty() {
+        return Err(CalibrationError::Input("no scan".into()));
+    }
+    let mirror = base.mirrored()?;
+    let fit = |t: &SphereMeshTemplate| -> Result<Vec<CloudPose>, CalibrationError> {
+        scans
+            .iter()
+            .map(|s| initialize_cloud_pose(t, s, search))
+            .collect()
+    };
+    let total = |v: &[CloudPose]| v.iter().map(|p| p.energy).sum::<f64>();
+    let (given, mirrored) = (fit(base)?, fit(&mirror)?);
+    let energies = [total(&given), total(&mirrored)];
+    let (template, poses, is_mirror, energies) = if energies[1] < energies[0] {
+        (mirror, mirrored, true, [energies[1], energies[0]])
+    } else {
+        (base.clone(), given, false, energies)
+    };
+    let frames = scans
+        .iter()
+        .map(|s| {
+            // `initialize_cloud_pose` accepted the scan, so it splits.
+            let hand = split_forearm(s).map_or_else(|| s.clone(), |h| h.hand);
+            CalibrationFrame::cloud(hand)
+        })
+        .collect();
+    Ok(CloudInit {
+        template,
+        mirrored: is_mirror,
+        poses,
+        frames,
+        energies,
+    })
+}
