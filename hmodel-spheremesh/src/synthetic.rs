@@ -11,6 +11,53 @@ use sensor_io::{Camera, Mask};
 
 use crate::context::intrinsics;
 
+/// A complete point cloud of `template` at `pose` (a noise-free multi-view scan, thesis §3.4):
+/// per element, random points on the spheres interpolated between its spheres (centers and radii
+/// blended by random weights) in random directions, kept when they lie on the model's outer
+/// surface (`|φ| ≤ 0.01 mm`: the surface is the envelope of those spheres, every other point
+/// of them is inside). About `n` points, spread over the elements by their surface area.
+pub fn surface_cloud(
+    template: &SphereMeshTemplate,
+    pose: &Pose,
+    n: usize,
+    seed: u64,
+) -> Result<Vec<nalgebra::Vector3<f64>>, hand_model::query::GeometryError> {
+    use rand::{Rng, SeedableRng};
+    let posed = PosedSphereMesh::new(template, pose);
+    let elements: Vec<_> = template.elements.iter().map(|e| e.element).collect();
+    let geometry = hand_model::query::SphereMeshGeometry::new(&posed.spheres, &elements)?;
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
+    let mut out = Vec::with_capacity(n);
+    // Rejection rate is high where elements overlap; a bounded number of tries keeps it finite.
+    for _ in 0..40 * n {
+        if out.len() >= n {
+            break;
+        }
+        let e = elements[rng.random_range(0..elements.len())].spheres();
+        let mut w: Vec<f64> = e.iter().map(|_| rng.random_range(0.0..1.0)).collect();
+        let total: f64 = w.iter().sum::<f64>().max(1e-12);
+        w.iter_mut().for_each(|x| *x /= total);
+        let (mut c, mut r) = (nalgebra::Vector3::zeros(), 0.0);
+        for (&k, wk) in e.iter().zip(&w) {
+            c += posed.spheres[k as usize].center * *wk;
+            r += posed.spheres[k as usize].radius * *wk;
+        }
+        let u = nalgebra::Vector3::new(
+            rng.random_range(-1.0..1.0),
+            rng.random_range(-1.0..1.0),
+            rng.random_range(-1.0..1.0),
+        );
+        let Some(u) = u.try_normalize(1e-6) else {
+            continue;
+        };
+        let p = c + u * r;
+        if geometry.phi(&p).is_some_and(|phi| phi.abs() <= 0.01) {
+            out.push(p);
+        }
+    }
+    Ok(out)
+}
+
 /// The frame the camera sees of `template` at `pose`: at most `max_points` points spread
 /// evenly over the rendered pixels (all of them when fewer), the camera, and the distance
 /// transform of the rendered silhouette. An error when the camera is invalid.

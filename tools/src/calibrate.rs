@@ -5,32 +5,48 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{bail, Context, Result};
 use clap::Args;
+use datasets::scans::{
+    principal_extents, read_obj_points, scale_from_extents, sphere_principal_extents,
+};
 use eval::plot::{line_plot_svg, Series};
 use hand_model::kinematics::Pose;
 use hand_model::query::SphereMeshGeometry;
 use hand_model::solver::PcaPrior;
 use hand_model::spheremesh::{PosedSphereMesh, SphereMeshTemplate};
 use hmodel_spheremesh::calibration::{
-    calibrate, select_frames, CalibrationConfig, CalibrationFrame,
+    calibrate, initialize_clouds, principal_frame, select_frames, split_forearm, Calibration,
+    CalibrationConfig, CalibrationFrame, CloudSearch, IterationRecord,
 };
 use hmodel_spheremesh::{Tracker, TrackerConfig};
 use image::{GenericImage, RgbImage};
+use nalgebra::Vector3;
 use sensor_io::io::write_atomic;
 
 use crate::methods::{ModelRenderer, SphereMeshRenderer};
 use crate::overlay;
 use crate::track::{for_each_frame, load_sphere_mesh, read_config};
 
-/// Calibrate the sphere-mesh template to a sequence: the sequence is tracked with the starting
-/// template, calibration frames are chosen (`--frames`, or `--auto N` by farthest-point
-/// sampling of the tracked poses), and the template's shape (honline β, rest orientations of
-/// the kinematic frames) is optimized jointly with those frames' poses.
+/// Calibrate the sphere-mesh template to a sequence or to complete scans.
 ///
-/// Example: `hands calibrate seq.mcap --auto 8 --out me.json --report calib/`
+/// A sequence is tracked with the starting template, calibration frames are chosen
+/// (`--frames`, or `--auto N` by farthest-point sampling of the tracked poses), and the
+/// template's shape (honline β, rest orientations of the kinematic frames) is optimized jointly
+/// with those frames' poses. A folder of `.obj` scans (complete point clouds of one hand in
+/// several poses, any unit) is calibrated from every scan: the unit is estimated (or given by
+/// `--units-per-mm`), the forearm cut off, the handedness and each scan's pose found by a
+/// hypothesis search (`hmodel_spheremesh::calibration::initialize_clouds`).
+///
+/// Examples: `hands calibrate seq.mcap --auto 8 --out me.json --report calib/`,
+/// `hands calibrate scans/ --out me.json`
 #[derive(Args)]
 pub struct CalibrateArgs {
-    /// Sequence (folder or `.mcap`) showing the hand in different poses.
+    /// Sequence (folder or `.mcap`) showing the hand in different poses, or a folder of `.obj`
+    /// scans.
     pub sequence: PathBuf,
+    /// Scan units per millimetre (scans only; default: estimated from the scans' hand extents
+    /// against the starting template's).
+    #[arg(long)]
+    pub units_per_mm: Option<f64>,
     /// Calibrate from these frame positions (comma-separated).
     #[arg(long, value_delimiter = ',', conflicts_with = "auto")]
     pub frames: Option<Vec<usize>>,
@@ -81,6 +97,9 @@ pub fn run(args: CalibrateArgs) -> Result<()> {
         None => hand_model::spheremesh::default_right_hand(),
     };
     let config: CalibrationConfig = read_config(args.config.as_deref())?;
+    if let Some(scans) = scan_files(&args.sequence)? {
+        return run_scans(&args, &base, &config, &scans);
+    }
     let prior = PcaPrior::project_default();
     let mut tracker = Tracker::new(&base, TrackerConfig::default(), Some(&prior))?;
     let sk = &base.skeleton;
@@ -123,64 +142,9 @@ pub fn run(args: CalibrateArgs) -> Result<()> {
     let cal_frames: Vec<CalibrationFrame> = chosen.iter().map(|&i| frames[i].clone()).collect();
     let init: Vec<Pose> = chosen.iter().map(|&i| poses[i].clone()).collect();
     let cal = calibrate(&base, &cal_frames, &init, &config)?;
-    let last = cal
-        .iterations
-        .iter()
-        .rev()
-        .find(|r| r.accepted)
-        .map_or(cal.initial_energy, |r| r.energy);
-    cal.template
-        .save(&args.out)
-        .with_context(|| format!("writing {}", args.out.display()))?;
-    eprintln!(
-        "calibrated from frames {chosen:?} of {read}: energy {:.1} → {last:.1} in {} iterations ({:.2} s) → {}",
-        cal.initial_energy,
-        cal.iterations.len(),
-        cal.seconds,
-        args.out.display()
-    );
-    let weak = cal.unconstrained(UNCONSTRAINED);
-    if !weak.is_empty() {
-        eprintln!(
-            "warning: the chosen frames barely constrain {} shape parameter(s); they stay near the starting template: {}",
-            weak.len(),
-            weak.join(", ")
-        );
-    }
+    let described = format!("frames {chosen:?} of {read}");
+    finish(&args, &cal, &described)?;
     if let Some(dir) = &args.report {
-        std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
-        let json = serde_json::to_string_pretty(&serde_json::json!({
-            "frames": chosen,
-            "iterations": cal.iterations,
-            "information": cal.information,
-            "unconstrained": weak,
-        }))?;
-        write_atomic(&dir.join("iterations.json"), json.as_bytes())?;
-        let series =
-            |name: &str, f: &dyn Fn(&hmodel_spheremesh::calibration::IterationRecord) -> f64| {
-                Series {
-                    label: name.into(),
-                    points: cal
-                        .iterations
-                        .iter()
-                        .enumerate()
-                        .filter(|(_, r)| r.accepted)
-                        .map(|(i, r)| (i as f64, f(r)))
-                        .collect(),
-                }
-            };
-        let svg = line_plot_svg(
-            "calibration energy (accepted steps)",
-            "iteration",
-            "energy",
-            &[
-                series("total", &|r| r.energy),
-                series("d2m", &|r| r.d2m),
-                series("m2d", &|r| r.m2d),
-            ],
-            None,
-        )?;
-        write_atomic(&dir.join("energy.svg"), svg.as_bytes())?;
         write_overlays(
             &args,
             dir,
@@ -191,6 +155,229 @@ pub fn run(args: CalibrateArgs) -> Result<()> {
         eprintln!("report → {}", dir.display());
     }
     Ok(())
+}
+
+/// Save the calibrated template, print the outcome (energies, weakly constrained parameters)
+/// and, with `--report`, write `iterations.json` and `energy.svg`; `described` names the data
+/// calibrated from.
+fn finish(args: &CalibrateArgs, cal: &Calibration, described: &str) -> Result<()> {
+    cal.template
+        .save(&args.out)
+        .with_context(|| format!("writing {}", args.out.display()))?;
+    eprintln!(
+        "calibrated from {described}: energy {:.1} → {:.1} in {} iterations ({:.2} s) → {}",
+        cal.initial_energy,
+        cal.best_energy(),
+        cal.iterations.len(),
+        cal.seconds,
+        args.out.display()
+    );
+    let weak = cal.unconstrained(UNCONSTRAINED);
+    if !weak.is_empty() {
+        eprintln!(
+            "warning: the data barely constrain {} shape parameter(s); they stay near the starting template: {}",
+            weak.len(),
+            weak.join(", ")
+        );
+    }
+    let Some(dir) = &args.report else {
+        return Ok(());
+    };
+    std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+    let json = serde_json::to_string_pretty(&serde_json::json!({
+        "data": described,
+        "iterations": cal.iterations,
+        "information": cal.information,
+        "unconstrained": weak,
+    }))?;
+    write_atomic(&dir.join("iterations.json"), json.as_bytes())?;
+    let series = |name: &str, f: &dyn Fn(&IterationRecord) -> f64| Series {
+        label: name.into(),
+        points: cal
+            .iterations
+            .iter()
+            .enumerate()
+            .filter(|(_, r)| r.accepted)
+            .map(|(i, r)| (i as f64, f(r)))
+            .collect(),
+    };
+    let svg = line_plot_svg(
+        "calibration energy (accepted steps)",
+        "iteration",
+        "energy",
+        &[
+            series("total", &|r| r.energy),
+            series("d2m", &|r| r.d2m),
+            series("m2d", &|r| r.m2d),
+        ],
+        None,
+    )?;
+    write_atomic(&dir.join("energy.svg"), svg.as_bytes())?;
+    Ok(())
+}
+
+/// The `.obj` files of `path` (sorted by name) when it is a folder holding some, else `None`.
+fn scan_files(path: &Path) -> Result<Option<Vec<PathBuf>>> {
+    if !path.is_dir() {
+        return Ok(None);
+    }
+    let mut files: Vec<PathBuf> = std::fs::read_dir(path)
+        .with_context(|| format!("reading {}", path.display()))?
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .filter(|p| p.extension().and_then(|e| e.to_str()) == Some("obj"))
+        .collect();
+    files.sort();
+    Ok((!files.is_empty()).then_some(files))
+}
+
+/// Scan units per mm: the median over scans of the hand part's principal extents against the
+/// starting template's rest extents (a hand of the template's size is assumed; the calibration
+/// then fits the size in that unit).
+fn estimate_units(base: &SphereMeshTemplate, scans: &[Vec<Vector3<f64>>]) -> Result<f64> {
+    let rest = PosedSphereMesh::new(base, &Pose::zeros(&base.skeleton));
+    let template = sphere_principal_extents(&rest.spheres)?;
+    let mut units = scans
+        .iter()
+        .map(|s| {
+            let hand = split_forearm(s).map_or_else(|| s.clone(), |h| h.hand);
+            Ok(scale_from_extents(&principal_extents(&hand)?, &template)?)
+        })
+        .collect::<Result<Vec<f64>>>()?;
+    units.sort_by(f64::total_cmp);
+    Ok(units[units.len() / 2])
+}
+
+/// `hands calibrate <folder of .obj scans>` (see [`CalibrateArgs`]).
+fn run_scans(
+    args: &CalibrateArgs,
+    base: &SphereMeshTemplate,
+    config: &CalibrationConfig,
+    files: &[PathBuf],
+) -> Result<()> {
+    if files.len() < MIN_FRAMES {
+        bail!(
+            "{} scan(s) in {}; calibration needs at least {MIN_FRAMES} scans in different poses",
+            files.len(),
+            args.sequence.display()
+        );
+    }
+    let scans = files
+        .iter()
+        .map(|f| read_obj_points(f).with_context(|| format!("reading {}", f.display())))
+        .collect::<Result<Vec<_>>>()?;
+    let estimated = estimate_units(base, &scans)?;
+    let units = match args.units_per_mm {
+        Some(u) if !(u.is_finite() && u > 0.0) => {
+            bail!("--units-per-mm {u} is not a positive number")
+        }
+        Some(u) => {
+            if !(0.67..=1.5).contains(&(u / estimated)) {
+                eprintln!(
+                    "warning: --units-per-mm {u} makes the hand {:.2}× the starting template's size (estimated unit: {estimated:.5} per mm); check the scans' unit",
+                    estimated / u
+                );
+            }
+            u
+        }
+        None => {
+            eprintln!("scan unit estimated: {estimated:.5} per mm (a hand of the template's size)");
+            estimated
+        }
+    };
+    let mm: Vec<Vec<Vector3<f64>>> = scans
+        .iter()
+        .map(|s| s.iter().map(|p| p / units).collect())
+        .collect();
+    let init = initialize_clouds(base, &mm, &CloudSearch::default())?;
+    eprintln!(
+        "{} hand (hypothesis energy {:.0} vs {:.0} mirrored); forearm removed: {:?} points",
+        if init.mirrored {
+            "mirror-image"
+        } else {
+            "starting"
+        },
+        init.energies[0],
+        init.energies[1],
+        scans
+            .iter()
+            .zip(&init.frames)
+            .map(|(s, f)| s.len() - f.points.len())
+            .collect::<Vec<_>>()
+    );
+    let poses: Vec<Pose> = init.poses.iter().map(|p| p.pose.clone()).collect();
+    let cal = calibrate(&init.template, &init.frames, &poses, config)?;
+    let before = scan_d2m(&init.template, &poses, &init.frames)?;
+    let after = scan_d2m(&cal.template, &cal.poses, &init.frames)?;
+    for ((f, b), a) in files.iter().zip(&before).zip(&after) {
+        eprintln!(
+            "  {}: mean distance to the model {b:.2} → {a:.2} mm",
+            f.file_name().unwrap_or_default().to_string_lossy()
+        );
+    }
+    finish(args, &cal, &format!("{} scans", files.len()))?;
+    if let Some(dir) = &args.report {
+        for (k, frame) in init.frames.iter().enumerate() {
+            let panels = [(&init.template, &poses[k]), (&cal.template, &cal.poses[k])]
+                .map(|(t, p)| point_distances(t, p, &frame.points))
+                .into_iter()
+                .map(|d| d.map(|d| cloud_views(&frame.points, &d)))
+                .collect::<Result<Vec<_>>>()?;
+            let (w, h) = (panels[0].width(), panels[0].height());
+            let mut image = RgbImage::new(w, 2 * h);
+            for (side, panel) in panels.iter().enumerate() {
+                image.copy_from(panel, 0, side as u32 * h)?;
+            }
+            let path = dir.join(format!("overlay-scan{k:02}.png"));
+            hand_model::render::preview::write_png(&path, &image)
+                .with_context(|| format!("writing {}", path.display()))?;
+        }
+        eprintln!("report → {}", dir.display());
+    }
+    Ok(())
+}
+
+/// Per scan the mean distance (mm) of its points to the model at its pose.
+fn scan_d2m(
+    template: &SphereMeshTemplate,
+    poses: &[Pose],
+    frames: &[CalibrationFrame],
+) -> Result<Vec<f64>> {
+    frames
+        .iter()
+        .zip(poses)
+        .map(|(f, p)| {
+            let d = point_distances(template, p, &f.points)?;
+            Ok(d.iter().flatten().sum::<f64>() / f.points.len().max(1) as f64)
+        })
+        .collect()
+}
+
+/// Side of one view panel of [`cloud_views`] (pixels).
+const VIEW: u32 = 320;
+
+/// A complete cloud seen along its three principal axes (three panels side by side), each point
+/// colored by its distance to the model ([`overlay::distance_color`]; magenta without one).
+fn cloud_views(points: &[Vector3<f64>], distances: &[Option<f64>]) -> RgbImage {
+    let mut image = RgbImage::new(3 * VIEW, VIEW);
+    let Some((c, axes, _)) = principal_frame(points) else {
+        return image;
+    };
+    let local: Vec<Vector3<f64>> = points.iter().map(|p| axes.transpose() * (p - c)).collect();
+    let reach = local.iter().map(|v| v.amax()).fold(1e-9, f64::max);
+    let half = f64::from(VIEW) / 2.0;
+    for (view, (a, b)) in [(0, 1), (0, 2), (1, 2)].into_iter().enumerate() {
+        for (v, d) in local.iter().zip(distances) {
+            let x = (v[a] / reach * (half - 2.0) + half) as u32;
+            let y = (v[b] / reach * (half - 2.0) + half) as u32;
+            let color = d.map_or([255, 0, 255], overlay::distance_color);
+            image.put_pixel(
+                view as u32 * VIEW + x.min(VIEW - 1),
+                y.min(VIEW - 1),
+                image::Rgb(color),
+            );
+        }
+    }
+    image
 }
 
 /// One image per chosen frame: the overlay of the starting template at its initial pose beside
@@ -246,7 +433,7 @@ fn write_overlays(
 fn point_distances(
     template: &SphereMeshTemplate,
     pose: &Pose,
-    points: &[nalgebra::Vector3<f64>],
+    points: &[Vector3<f64>],
 ) -> Result<Vec<Option<f64>>> {
     let posed = PosedSphereMesh::new(template, pose);
     let elements: Vec<_> = template.elements.iter().map(|e| e.element).collect();

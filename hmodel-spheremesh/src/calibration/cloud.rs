@@ -172,12 +172,13 @@ const PROFILE_BINS: usize = 48;
 
 /// Cut the forearm off a complete scan of a hand, from the scan's shape alone (no model, any
 /// unit). Along the long axis, the cross-section radius (RMS distance of a slice's points to
-/// the slice's centroid, 48 slices) is a forearm's plateau at one end and the hand's wider
-/// profile at the other: the end whose slices are narrower on average is the forearm's. Walking
-/// from the widest slice toward it, the wrist is the first slice within 10 % of the forearm's
-/// radius; points beyond the wrist by more than 0.2 × the wrist-to-hand-end length (the
+/// the slice's centroid, 48 slices) is a forearm's plateau at one end and the hand's wider or
+/// varying profile at the other: the end whose slices are narrower and steadier is the
+/// forearm's. The wrist
+/// is the narrowest slice in the first 60 % of the way from the widest slice toward that end;
+/// points beyond the wrist by more than 0.2 × the wrist-to-hand-end length (the
 /// template's wrist segment reaches 46 mm below the crease, about 0.2 of a hand's length) are
-/// removed. A scan whose profile never narrows to the forearm's radius keeps all its points.
+/// removed. A scan without a forearm loses at most a stretch of its wrist.
 pub fn split_forearm(points: &[Vector3<f64>]) -> Option<ForearmSplit> {
     let (c, axes, _) = principal_frame(points)?;
     let a0: Vector3<f64> = axes.column(0).into_owned();
@@ -188,7 +189,7 @@ pub fn split_forearm(points: &[Vector3<f64>]) -> Option<ForearmSplit> {
             (l.min(x), h.max(x))
         });
     let width = (hi - lo) / PROFILE_BINS as f64;
-    if !(width > 0.0) {
+    if width.is_nan() || width <= 0.0 {
         return None;
     }
     let bin = |x: f64| (((x - lo) / width) as usize).min(PROFILE_BINS - 1);
@@ -212,24 +213,32 @@ pub fn split_forearm(points: &[Vector3<f64>]) -> Option<ForearmSplit> {
             r.map(|j| spread[j].sqrt()).sum::<f64>() / n
         })
         .collect();
-    // The forearm's end is the narrower one (slices 3..15 from each end: past a scan's
-    // rounded edge, short of the palm).
-    let end_mean = |bins: &mut dyn Iterator<Item = usize>| {
+    // The forearm's end is the narrower and steadier one (slices 3..15 from each end: past a
+    // scan's rounded edge, short of the palm): score = mean radius × (1 + 4 × its coefficient
+    // of variation), since a pointing finger is narrow too, but not steady.
+    let end_stats = |bins: std::ops::Range<usize>| {
         let v: Vec<f64> = bins.map(|k| radius[k]).collect();
-        v.iter().sum::<f64>() / v.len() as f64
+        let n = v.len() as f64;
+        let mean = v.iter().sum::<f64>() / n;
+        let sd = (v.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / n).sqrt();
+        mean + 4.0 * sd
     };
-    let low = end_mean(&mut (3..15));
-    let high = end_mean(&mut (PROFILE_BINS - 15..PROFILE_BINS - 3));
+    let low = end_stats(3..15);
+    let high = end_stats(PROFILE_BINS - 15..PROFILE_BINS - 3);
     let forearm_low = low < high;
-    let forearm = low.min(high);
     let toward_fingers = if forearm_low { a0 } else { -a0 };
     let widest = (0..PROFILE_BINS).max_by(|&a, &b| radius[a].total_cmp(&radius[b]))?;
-    let mut walk: Box<dyn Iterator<Item = usize>> = if forearm_low {
-        Box::new((0..widest).rev())
+    // The wrist: the narrowest slice in the first 60 % of the way from the widest slice to the
+    // forearm's end (the rest may be the scan's tapering edge).
+    let window: Vec<usize> = if forearm_low {
+        (widest - (widest * 3 / 5)..widest).collect()
     } else {
-        Box::new(widest + 1..PROFILE_BINS)
+        (widest + 1..=widest + (PROFILE_BINS - 1 - widest) * 3 / 5).collect()
     };
-    let Some(wrist) = walk.find(|&k| radius[k] <= 1.1 * forearm) else {
+    let Some(wrist) = window
+        .into_iter()
+        .min_by(|&a, &b| radius[a].total_cmp(&radius[b]))
+    else {
         return Some(ForearmSplit {
             hand: points.to_vec(),
             removed: 0,
