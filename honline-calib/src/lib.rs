@@ -20,6 +20,8 @@
 //!   information form on the per-frame modes (Eq. 4.8–4.10, Table 1, [`ShapeBelief::fuse`]) —
 //!   and joint cumulative, the default — E_iekf (Eq. 4.11) inside the LM, an IEKF (Table 2,
 //!   §4.6.3, [`ShapeBelief::absorb`]).
+//! - Calibration guidance (thesis §5.2, [`guide`]): the least-certain shape parameters and the
+//!   candidate pose whose expected information gain for them is largest.
 //! - Output per frame ([`OnlineFrame`]): β̂_n and the per-frame mode β*_n with their certainties
 //!   (the diagonals of Σ̂_n⁻¹ and Σ*_n⁻¹), in the DESIGN.md record (`shape`, `shape_certainty`).
 //!
@@ -54,10 +56,12 @@
 //! ```
 
 mod filter;
+mod guide;
 mod online;
 mod shape;
 pub mod terms;
 
 pub use filter::{marginal_information, Estimator, ShapeBelief};
+pub use guide::{guide, Guidance};
 pub use online::{OnlineCalibrator, OnlineConfig, OnlineError, OnlineFrame};
 pub use shape::{beta_error, error_subset, ShapeSubset};

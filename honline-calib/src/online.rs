@@ -344,6 +344,42 @@ impl OnlineCalibrator {
         pose
     }
 
+    /// Eq. 4.5 at the context's current linearization: the data terms' Gauss–Newton Hessian,
+    /// marginalized over the pose (not yet scaled by the measurement weight).
+    fn data_information(&mut self) -> Option<DMatrix<f64>> {
+        self.data_ne.clear();
+        self.data.accumulate(&self.ctx, &mut self.data_ne).ok()?;
+        self.data_ne.symmetrize();
+        let theta: Vec<usize> = (0..self.layout.num_dofs).collect();
+        let beta: Vec<usize> = (0..self.layout.active.len())
+            .map(|j| self.layout.beta_index(j))
+            .collect();
+        marginal_information(self.data_ne.lhs(), &theta, &beta)
+    }
+
+    /// The information (over the active β, per mm², scaled like a measurement) that `frame`
+    /// would bring if the hand were at `pose`: Eq. 4.5 linearized there with the current shape,
+    /// without solving — what calibration guidance ranks candidate poses by (thesis §5.2).
+    /// `None` when the frame has too few points or the linearization fails. The next
+    /// [`track`](Self::track) sets its own frame, so this leaves tracking unaffected.
+    pub fn expected_information(
+        &mut self,
+        frame: &PreprocessedFrame,
+        pose: &Pose,
+    ) -> Option<DMatrix<f64>> {
+        if frame.points.len() < self.config.min_points.max(1)
+            || pose.values.len() != self.layout.num_dofs
+        {
+            return None;
+        }
+        self.ctx.tracking.set_frame(frame);
+        self.ctx.tracking.update(pose, false).ok()?;
+        let h = self.data_information()? * self.config.measurement_weight;
+        // Restore the tracked pose's linearization for anyone reading the context.
+        let _ = self.ctx.tracking.update(&self.pose.clone(), false);
+        h.iter().all(|v| v.is_finite()).then_some(h)
+    }
+
     /// Track one frame and update the shape estimate (crate docs). Never returns a non-finite
     /// value or an invalid shape: a frame that cannot be solved keeps the previous pose and
     /// estimate and is flagged (`no_hand`, `solver_failed`).
@@ -420,18 +456,7 @@ impl OnlineCalibrator {
                 let t1 = Instant::now();
                 // Eq. 4.5 at the last linearization: the data terms' Gauss–Newton Hessian,
                 // marginalized over the pose.
-                self.data_ne.clear();
-                let info = self
-                    .data
-                    .accumulate(&self.ctx, &mut self.data_ne)
-                    .ok()
-                    .and_then(|_| {
-                        self.data_ne.symmetrize();
-                        let theta: Vec<usize> = (0..self.layout.num_dofs).collect();
-                        let beta: Vec<usize> = (0..k).map(|j| self.layout.beta_index(j)).collect();
-                        marginal_information(self.data_ne.lhs(), &theta, &beta)
-                    });
-                if let Some(h) = info {
+                if let Some(h) = self.data_information() {
                     frame_info = h * self.config.measurement_weight;
                     solved = true;
                     self.pose = pose;
