@@ -5,12 +5,16 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{bail, Context, Result};
 use clap::Args;
+use datasets::motion::KeyPose;
+use datasets::prior::authored_samples;
 use datasets::scans::{
     principal_extents, read_obj_points, scale_from_extents, sphere_principal_extents,
 };
 use eval::plot::{line_plot_svg, Series};
+use hand_model::kinematics::names::DIGIT_DOFS;
 use hand_model::kinematics::Pose;
 use hand_model::query::SphereMeshGeometry;
+use hand_model::render::preview::{write_preview_png, PreviewOptions};
 use hand_model::solver::PcaPrior;
 use hand_model::spheremesh::{PosedSphereMesh, SphereMeshTemplate};
 use hmodel_spheremesh::calibration::{
@@ -18,6 +22,7 @@ use hmodel_spheremesh::calibration::{
     CalibrationConfig, CalibrationFrame, CloudSearch, IterationRecord,
 };
 use hmodel_spheremesh::{Tracker, TrackerConfig};
+use honline_calib::{guide, OnlineCalibrator, OnlineConfig};
 use image::{GenericImage, RgbImage};
 use nalgebra::Vector3;
 use sensor_io::io::write_atomic;
@@ -77,6 +82,13 @@ pub struct CalibrateArgs {
     /// Read at most this many frames of the sequence.
     #[arg(long)]
     pub max_frames: Option<usize>,
+    /// Calibration guidance (thesis §5.2) instead of an offline calibration: calibrate online
+    /// (joint cumulative estimator) over the sequence, print the least-certain shape
+    /// parameters and the pose of the prior's corpus whose expected information gain for them
+    /// is largest, write the online estimate to `--out` and a rendering of the suggested pose
+    /// beside it (`me.json` → `me.guide.png`).
+    #[arg(long, conflicts_with_all = ["frames", "auto"])]
+    pub guide: bool,
 }
 
 /// Fewer frames than this cannot tell shape from pose (thesis §3.4: "multiple measurements are
@@ -96,6 +108,9 @@ pub fn run(args: CalibrateArgs) -> Result<()> {
         Some(spec) => load_sphere_mesh(spec)?,
         None => hand_model::spheremesh::default_right_hand(),
     };
+    if args.guide {
+        return run_guide(&args, &base);
+    }
     let config: CalibrationConfig = read_config(args.config.as_deref())?;
     if let Some(scans) = scan_files(&args.sequence)? {
         return run_scans(&args, &base, &config, &scans);
@@ -155,6 +170,77 @@ pub fn run(args: CalibrateArgs) -> Result<()> {
         eprintln!("report → {}", dir.display());
     }
     Ok(())
+}
+
+/// Parameters the guidance targets.
+const GUIDE_TARGETS: usize = 5;
+
+/// `hands calibrate --guide` (see [`CalibrateArgs::guide`]).
+fn run_guide(args: &CalibrateArgs, base: &SphereMeshTemplate) -> Result<()> {
+    let prior = PcaPrior::project_default();
+    let mut calib = OnlineCalibrator::new(base, OnlineConfig::default(), Some(&prior))?;
+    let mut camera = None;
+    let read = for_each_frame(
+        &args.sequence,
+        &args.segmentation,
+        args.points,
+        args.max_frames,
+        "online",
+        |sf| {
+            camera = sf.pre.camera.clone().or(camera.take());
+            calib.track(sf.pre, sf.position as u64, 0.0);
+            Ok(())
+        },
+    )?;
+    let camera = camera.context("no frame of the sequence has a camera")?;
+    let sk = &base.skeleton;
+    let digits = |place: &Pose, sample: &[f64]| {
+        let mut p = place.clone();
+        for (name, v) in DIGIT_DOFS.iter().zip(sample) {
+            // Templates without a digit DOF keep it at its value.
+            let _ = p.set(sk, name, *v);
+        }
+        p.clamp_to_limits(sk);
+        p
+    };
+    let samples = authored_samples()?;
+    let place = calib.pose().clone();
+    let candidates: Vec<Pose> = samples.iter().map(|s| digits(&place, s)).collect();
+    let g = guide(&mut calib, &candidates, &camera, GUIDE_TARGETS)
+        .context("no corpus pose could be rendered in front of the sensor")?;
+    println!("after {read} frames, the least certain shape parameters (certainty per mm²):");
+    for (_, name, c) in &g.weakest {
+        println!("  {name}: {c:.4}");
+    }
+    let name = KeyPose::ALL.get(g.best).map_or_else(
+        || format!("corpus pose #{}", g.best),
+        |k| format!("key pose `{}`", k.name()),
+    );
+    println!(
+        "suggested next pose: {name} (expected gain {:.2}, median over the corpus {:.2})",
+        g.gains[g.best],
+        median(&g.gains)
+    );
+    calib
+        .template()
+        .save(&args.out)
+        .with_context(|| format!("writing {}", args.out.display()))?;
+    let png = args.out.with_extension("").with_extension("guide.png");
+    let shown = digits(&Pose::zeros(sk), &samples[g.best]);
+    write_preview_png(&png, calib.template(), &shown, &PreviewOptions::default())
+        .with_context(|| format!("writing {}", png.display()))?;
+    eprintln!(
+        "online estimate → {}, suggested pose → {}",
+        args.out.display(),
+        png.display()
+    );
+    Ok(())
+}
+
+fn median(v: &[f64]) -> f64 {
+    let mut s = v.to_vec();
+    s.sort_by(f64::total_cmp);
+    s.get(s.len() / 2).copied().unwrap_or(0.0)
 }
 
 /// Save the calibrated template, print the outcome (energies, weakly constrained parameters)
