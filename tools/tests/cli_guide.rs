@@ -56,7 +56,7 @@ fn guide_suggests_an_informative_pose() {
         .find(|l| l.starts_with("suggested next pose"))
         .expect("suggestion");
     let numbers: Vec<f64> = line
-        .split(|c: char| c == ' ' || c == ',' || c == ')')
+        .split([' ', ',', ')'])
         .filter_map(|w| w.parse().ok())
         .collect();
     let (gain, median) = (numbers[numbers.len() - 2], numbers[numbers.len() - 1]);
