@@ -2,21 +2,8 @@
 //! a corpus pose with an above-median expected gain, writes the online estimate and a rendering
 //! of the suggestion.
 
-use std::process::Command;
-
-fn hands(args: &[&str]) -> (bool, String) {
-    let out = Command::new(env!("CARGO_BIN_EXE_hands"))
-        .args(args)
-        .env("RUST_BACKTRACE", "0")
-        .output()
-        .expect("run hands");
-    let text = format!(
-        "{}{}",
-        String::from_utf8_lossy(&out.stdout),
-        String::from_utf8_lossy(&out.stderr)
-    );
-    (out.status.success(), text)
-}
+mod common;
+use common::hands;
 
 #[test]
 fn guide_suggests_an_informative_pose() {

@@ -3,29 +3,17 @@
 //! each scan turned arbitrarily) estimates the unit, removes the forearm, tells the hand, finds
 //! poses that calibration improves, and writes a template; bad folders fail clearly.
 
+mod common;
+use common::hands;
+
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
-use std::process::Command;
 
 use hand_model::kinematics::Pose;
 use hand_model::math::fit_similarity;
 use hand_model::spheremesh::{default_right_hand, PosedSphereMesh, ShapeBasis, SphereMeshTemplate};
 use hmodel_spheremesh::synthetic::surface_cloud;
 use nalgebra::{Rotation3, Vector3};
-
-fn hands(args: &[&str]) -> (bool, String) {
-    let out = Command::new(env!("CARGO_BIN_EXE_hands"))
-        .args(args)
-        .env("RUST_BACKTRACE", "0")
-        .output()
-        .expect("run hands");
-    let text = format!(
-        "{}{}",
-        String::from_utf8_lossy(&out.stdout),
-        String::from_utf8_lossy(&out.stderr)
-    );
-    (out.status.success(), text)
-}
 
 fn tmp(name: &str) -> PathBuf {
     let d = std::env::temp_dir().join(format!("hands-scans-{}-{name}", std::process::id()));
