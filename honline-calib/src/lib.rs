@@ -54,6 +54,7 @@
 //! ```
 
 mod filter;
+mod frame;
 mod online;
 mod shape;
 pub mod terms;
