@@ -5,9 +5,7 @@
 
 use hand_model::kinematics::Pose;
 use hand_model::solver::terms::{JointLimits, PosePrior};
-use hand_model::solver::{
-    EnergyTerm, NoTerm, NormalEquations, PcaPrior, PriorSetup, TermError,
-};
+use hand_model::solver::{EnergyTerm, NoTerm, NormalEquations, PcaPrior, PriorSetup, TermError};
 use hand_model::spheremesh::{ShapeBasis, SphereMeshTemplate};
 use hmodel_spheremesh::calibration::{DataWeights, ShapeSpace};
 use hmodel_spheremesh::terms::Collision;
@@ -17,8 +15,8 @@ use nalgebra::DMatrix;
 use crate::filter::marginal_information;
 use crate::online::{OnlineConfig, OnlineError};
 use crate::terms::{
-    finger_order_constraints, Layout, Lifted, OnlineCtx, ShapeData, ShapePrior,
-    ShapePriorParams, ShapeValidity,
+    finger_order_constraints, Layout, Lifted, OnlineCtx, ShapeData, ShapePrior, ShapePriorParams,
+    ShapeValidity,
 };
 
 /// The most terms one solve runs.
@@ -155,9 +153,11 @@ impl FrameProblem {
         };
         let all: [Option<&'a dyn EnergyTerm<OnlineCtx>>; MAX_TERMS] = [
             Some(&self.data),
-            e.collision.then_some(&self.collision as &dyn EnergyTerm<OnlineCtx>),
+            e.collision
+                .then_some(&self.collision as &dyn EnergyTerm<OnlineCtx>),
             temporal,
-            e.joint_limits.then_some(&self.limits as &dyn EnergyTerm<OnlineCtx>),
+            e.joint_limits
+                .then_some(&self.limits as &dyn EnergyTerm<OnlineCtx>),
             pose_prior,
             Some(&self.prior),
             Some(&self.validity),
@@ -201,9 +201,23 @@ impl FrameProblem {
         beta.iter().all(|v| v.is_finite()) && self.basis.apply(&self.base, beta).is_ok()
     }
 
-    /// One shape step: `next ← β + δβ` on the active entries, clamped to the β bounds, and
-    /// `β̃ + δβ̃` clamped to [0.5, 2]. `None` (and `next` unspecified) when the shape is not a
-    /// valid model or a value is not finite, so that no invalid shape is ever accepted.
+    /// One shape step: `next ← β + δβ` on the active entries, clamped to the β bounds; false
+    /// (and `next` unspecified) when the result is not a valid model or not finite, so that no
+    /// invalid shape is ever accepted.
+    pub(crate) fn step_beta(&self, beta: &[f64], delta_beta: &[f64], next: &mut Vec<f64>) -> bool {
+        if delta_beta.len() != self.layout.active.len() || beta.len() != self.basis.len() {
+            return false;
+        }
+        next.clear();
+        next.extend_from_slice(beta);
+        for (&i, &d) in self.layout.active.iter().zip(delta_beta) {
+            next[i] += d;
+        }
+        self.project(next)
+    }
+
+    /// [`FrameProblem::step_beta`] together with the latent step `β̃ + δβ̃` clamped to
+    /// [0.5, 2]; `None` when either is refused.
     pub(crate) fn step_shape(
         &self,
         beta: &[f64],
@@ -212,21 +226,8 @@ impl FrameProblem {
         delta_latent: &[f64],
         next: &mut Vec<f64>,
     ) -> Option<[f64; 3]> {
-        if delta_beta.len() != self.layout.active.len() || delta_latent.len() != 3 {
-            return None;
-        }
-        next.clear();
-        next.extend_from_slice(beta);
-        for (&i, &d) in self.layout.active.iter().zip(delta_beta) {
-            next[i] += d;
-        }
-        let latent = [
-            latent[0] + delta_latent[0],
-            latent[1] + delta_latent[1],
-            latent[2] + delta_latent[2],
-        ];
-        (latent.iter().all(|v| v.is_finite()) && self.project(next))
-            .then(|| latent.map(|v| v.clamp(0.5, 2.0)))
+        let latent = step_latent(latent, delta_latent)?;
+        self.step_beta(beta, delta_beta, next).then_some(latent)
     }
 
     /// The Laplace information of Eq. 4.5 restricted to β: the data terms' Gauss–Newton
@@ -247,4 +248,16 @@ impl FrameProblem {
             .collect();
         marginal_information(ne.lhs(), &theta, &beta)
     }
+}
+
+/// The latent scale factors β̃ of Eq. 4.14 after the step `delta` (length 3), clamped to
+/// [0.5, 2]; `None` when a value is not finite or `delta` has the wrong length.
+pub(crate) fn step_latent(latent: [f64; 3], delta: &[f64]) -> Option<[f64; 3]> {
+    let &[a, b, c] = delta else {
+        return None;
+    };
+    let next = [latent[0] + a, latent[1] + b, latent[2] + c];
+    next.iter()
+        .all(|v| v.is_finite())
+        .then(|| next.map(|v| v.clamp(0.5, 2.0)))
 }

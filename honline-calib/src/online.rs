@@ -6,8 +6,8 @@ use std::time::Instant;
 use hand_model::kinematics::Pose;
 use hand_model::solver::terms::Temporal;
 use hand_model::solver::{
-    sphere_mesh_points, EnergyTerm, IterInfo, LmCallback, LmError, LmSolver, LmWorkspace, NormalEquations,
-    PcaPrior, TermError,
+    sphere_mesh_points, EnergyTerm, IterInfo, LmCallback, LmError, LmSolver, LmWorkspace,
+    NormalEquations, PcaPrior, TermError,
 };
 use hand_model::spheremesh::{PosedSphereMesh, ShapeBasis, SphereMeshTemplate};
 use hand_model::ModelError;

@@ -208,9 +208,8 @@ impl BlockArrow {
 
     /// Whether every entry is finite.
     pub fn is_finite(&self) -> bool {
-        let finite = |m: &Mat<f64>| {
-            (0..m.ncols()).all(|j| (0..m.nrows()).all(|i| m[(i, j)].is_finite()))
-        };
+        let finite =
+            |m: &Mat<f64>| (0..m.ncols()).all(|j| (0..m.nrows()).all(|i| m[(i, j)].is_finite()));
         self.frames
             .iter()
             .all(|f| finite(&f.p) && finite(&f.c) && finite(&f.b))
