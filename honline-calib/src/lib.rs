@@ -24,6 +24,12 @@
 //!   candidate pose whose expected information gain for them is largest.
 //! - Output per frame ([`OnlineFrame`]): β̂_n and the per-frame mode β*_n with their certainties
 //!   (the diagonals of Σ̂_n⁻¹ and Σ*_n⁻¹), in the DESIGN.md record (`shape`, `shape_certainty`).
+//! - The offline baselines of §4.3.4 ([`calibrate_offline`]): Offline-Hard (Eq. 4.12, one β
+//!   shared by frames sub-sampled at ≈ 1/20, [`subsample`]) and Offline-Soft (Eq. 4.13, a β_n
+//!   per frame tied to the common β by ω_β‖β_n − β‖², ω_β = 1e5), one Levenberg–Marquardt over
+//!   all frames' poses and the shape on the block-arrow normal equations
+//!   ([`hmodel_spheremesh::calibration::BlockArrow`], faer); β with its certainty, the poses and
+//!   the energy history ([`OfflineCalibration`]).
 //!
 //! # Choices where the thesis is silent or the originals differ (ANCHOR-FACTS §7)
 //! - The full measured information (off-diagonal entries included) enters the filter; honline
@@ -35,7 +41,7 @@
 //! - The Laplace information comes from the data terms only (Eq. 4.5), the pose marginalized;
 //!   priors and barriers shape the mode but are not counted as measurements.
 //! - Not yet here: loss detection and re-initialization (the first pose comes from
-//!   [`OnlineCalibrator::set_pose`] or the PCA mean placed on the points), Offline-Hard/Soft.
+//!   [`OnlineCalibrator::set_pose`] or the PCA mean placed on the points).
 //! - β moves on the non-rigid LM iterations only (honline); each step is clamped to the β bounds
 //!   and dropped when the basis refuses the shape, so every output is a valid model.
 //! - A frame with too few points is not solved: the estimate and its certainty are kept, the
@@ -56,12 +62,18 @@
 //! ```
 
 mod filter;
+mod frame;
 mod guide;
+mod offline;
 mod online;
 mod shape;
 pub mod terms;
 
 pub use filter::{marginal_information, Estimator, ShapeBelief};
 pub use guide::{guide, Guidance};
+pub use offline::{
+    calibrate_offline, subsample, Offline, OfflineCalibration, OfflineConfig, OfflineError,
+    OfflineIteration, SoftStart, MIN_FRAMES, SUBSAMPLING,
+};
 pub use online::{OnlineCalibrator, OnlineConfig, OnlineError, OnlineFrame};
 pub use shape::{beta_error, error_subset, ShapeSubset};

@@ -4,27 +4,23 @@
 use std::time::Instant;
 
 use hand_model::kinematics::Pose;
-use hand_model::solver::terms::{JointLimits, PosePrior, Temporal};
+use hand_model::solver::terms::Temporal;
 use hand_model::solver::{
-    sphere_mesh_points, EnergyTerm, IterInfo, LmCallback, LmError, LmSolver, LmWorkspace, NoTerm,
-    NormalEquations, PcaPrior, PriorSetup, TermError,
+    sphere_mesh_points, EnergyTerm, IterInfo, LmCallback, LmError, LmSolver, LmWorkspace,
+    NormalEquations, PcaPrior, TermError,
 };
 use hand_model::spheremesh::{PosedSphereMesh, ShapeBasis, SphereMeshTemplate};
 use hand_model::ModelError;
-use hmodel_spheremesh::calibration::{DataWeights, ShapeSpace};
-use hmodel_spheremesh::terms::Collision;
 use hmodel_spheremesh::{TrackerConfig, TrackingCtx};
 use nalgebra::{DMatrix, DVector, Vector3};
 use sensor_io::preprocess::PreprocessedFrame;
 use sensor_io::record::HandRecord;
 use serde::{Deserialize, Serialize};
 
-use crate::filter::{marginal_information, Estimator, ShapeBelief};
+use crate::filter::{Estimator, ShapeBelief};
+use crate::frame::FrameProblem;
 use crate::shape::ShapeSubset;
-use crate::terms::{
-    finger_order_constraints, IekfPrior, Layout, Lifted, OnlineCtx, ShapeData, ShapePrior,
-    ShapePriorParams, ShapeValidity,
-};
+use crate::terms::{IekfPrior, Layout, OnlineCtx};
 
 /// Settings of the online calibration.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -108,9 +104,7 @@ pub struct OnlineFrame {
 
 /// Reshapes the context's template when β changed and accepts only valid β steps.
 struct ShapeCallback<'a> {
-    base: &'a SphereMeshTemplate,
-    basis: &'a ShapeBasis,
-    layout: &'a Layout,
+    problem: &'a FrameProblem,
     next: Vec<f64>,
     rejected: usize,
 }
@@ -122,26 +116,17 @@ impl LmCallback<OnlineCtx> for ShapeCallback<'_> {
         ctx: &mut OnlineCtx,
         info: IterInfo,
     ) -> Result<(), TermError> {
-        if ctx.dirty {
-            let t = self
-                .basis
-                .apply(self.base, &ctx.beta)
-                .map_err(|_| TermError::Failed("invalid shape"))?;
-            ctx.tracking
-                .set_template(t)
-                .map_err(|_| TermError::Failed("template topology changed"))?;
-            ctx.dirty = false;
-        }
-        ctx.tracking.update(pose, info.rigid_only)
+        self.problem.prepare(ctx, pose, info.rigid_only)
     }
 
     /// β ← β + δβ clamped to the β bounds, β̃ ← β̃ + δβ̃; a step whose shape the basis refuses
     /// (a negative radius, a non-finite value) is dropped, so every iterate is a valid model.
     fn apply_aux(&mut self, ctx: &mut OnlineCtx, delta_aux: &[f64]) {
-        let off = self.layout.beta - self.layout.num_dofs;
-        let lat = self.layout.latent - self.layout.num_dofs;
+        let layout = &self.problem.layout;
+        let off = layout.beta - layout.num_dofs;
+        let lat = layout.latent - layout.num_dofs;
         let (Some(db), Some(dl)) = (
-            delta_aux.get(off..off + self.layout.active.len()),
+            delta_aux.get(off..off + layout.active.len()),
             delta_aux.get(lat..lat + 3),
         ) else {
             return;
@@ -149,27 +134,16 @@ impl LmCallback<OnlineCtx> for ShapeCallback<'_> {
         if db.iter().chain(dl).all(|&d| d == 0.0) {
             return;
         }
-        self.next.clone_from(&ctx.beta);
-        for (&i, &d) in self.layout.active.iter().zip(db) {
-            let p = &self.basis.params[i];
-            let mut v = self.next[i] + d;
-            if let Some([lo, hi]) = p.limits {
-                v = v.clamp(lo, hi);
+        match self
+            .problem
+            .step_shape(&ctx.beta, ctx.latent, db, dl, &mut self.next)
+        {
+            Some(latent) => {
+                std::mem::swap(&mut ctx.beta, &mut self.next);
+                ctx.latent = latent;
+                ctx.dirty = true;
             }
-            self.next[i] = v;
-        }
-        let latent = [
-            ctx.latent[0] + dl[0],
-            ctx.latent[1] + dl[1],
-            ctx.latent[2] + dl[2],
-        ];
-        let finite = latent.iter().chain(&self.next).all(|v| v.is_finite());
-        if finite && self.basis.apply(self.base, &self.next).is_ok() {
-            std::mem::swap(&mut ctx.beta, &mut self.next);
-            ctx.latent = latent.map(|v| v.clamp(0.5, 2.0));
-            ctx.dirty = true;
-        } else {
-            self.rejected += 1;
+            None => self.rejected += 1,
         }
     }
 }
@@ -177,24 +151,15 @@ impl LmCallback<OnlineCtx> for ShapeCallback<'_> {
 /// Joint tracking and online calibration of the sphere-mesh model (thesis Ch. 4, module docs of
 /// the crate). One per sequence.
 pub struct OnlineCalibrator {
-    base: SphereMeshTemplate,
-    basis: ShapeBasis,
+    problem: FrameProblem,
     config: OnlineConfig,
-    layout: Layout,
     solver: LmSolver,
     ws: LmWorkspace,
     ctx: OnlineCtx,
-    data: ShapeData,
-    prior: ShapePrior,
-    validity: ShapeValidity,
     iekf: IekfPrior,
-    collision: Lifted<Collision>,
-    limits: JointLimits,
     temporal: Temporal,
-    pose_prior: Option<PosePrior>,
     belief: ShapeBelief,
     pose: Pose,
-    mean_pose: Pose,
     initialized: bool,
     data_ne: NormalEquations,
     next: Vec<f64>,
@@ -208,84 +173,37 @@ impl OnlineCalibrator {
         config: OnlineConfig,
         prior: Option<&PcaPrior>,
     ) -> Result<Self, OnlineError> {
-        let sk = &base.skeleton;
-        let tc = &config.tracker;
-        let PriorSetup {
-            prior: pose_prior,
-            mean_pose,
-            ..
-        } = PriorSetup::new::<OnlineError>(sk, prior, &tc.pose_prior, &tc.lm)?;
-        let num_pca = pose_prior.as_ref().map_or(0, PosePrior::num_aux);
-        let space = ShapeSpace::new(base, false)?;
-        let basis = space.basis().clone();
-        let active = config.subset.indices(&basis);
-        let nd = sk.num_dofs();
-        let layout = Layout {
-            num_dofs: nd,
-            beta: nd + num_pca,
-            latent: nd + num_pca + active.len(),
-            active,
-        };
-        let solver = LmSolver::new(sk, layout.dim() - nd, tc.lm.clone())?;
+        let problem = FrameProblem::new(base, &config, prior)?;
+        let layout = &problem.layout;
+        let nd = layout.num_dofs;
+        let solver = LmSolver::new(&base.skeleton, layout.dim() - nd, config.tracker.lm.clone())?;
         let ws = solver.workspace();
-        let mut tracking = TrackingCtx::owned(base.clone(), tc.view.view(), tc.irls.clone())?;
-        tracking.set_front_facing(tc.front_facing);
-        tracking.set_m2d(tc.enabled.m2d.then_some(tc.m2d_mode));
-        tracking.set_m2d_stride(tc.m2d_stride);
-        let beta = basis.template_values();
-        let mean: Vec<f64> = layout.active.iter().map(|&i| beta[i]).collect();
-        let weights = DataWeights {
-            d2m: if tc.enabled.d2m { tc.d2m.weight } else { 0.0 },
-            m2d: tc.m2d.weight,
-        };
+        let ctx = problem.context(&config.tracker)?;
+        let mean: Vec<f64> = layout.active.iter().map(|&i| ctx.beta[i]).collect();
         Ok(Self {
-            data: ShapeData::new(space, &layout, weights),
-            prior: ShapePrior::new(
-                &basis,
-                &layout,
-                ShapePriorParams {
-                    weight: config.shape_prior,
-                    radius_weight: config.radius_prior,
-                    limits: config.limits,
-                    damping: config.beta_damping,
-                },
-            ),
-            validity: ShapeValidity::new(finger_order_constraints(&basis), &layout, config.valid),
-            iekf: IekfPrior::new(&layout),
-            collision: Lifted(Collision::new(base, tc.collision.clone())),
-            limits: JointLimits::new(sk, &tc.joint_limits),
-            temporal: Temporal::new(sphere_mesh_points(base), &tc.temporal),
-            pose_prior,
+            iekf: IekfPrior::new(layout),
+            temporal: Temporal::new(sphere_mesh_points(base), &config.tracker.temporal),
             belief: ShapeBelief::vague(&mean, config.initial_information),
-            ctx: OnlineCtx {
-                tracking,
-                beta: beta.clone(),
-                latent: [1.0; 3],
-                prior: None,
-                dirty: false,
-            },
             data_ne: NormalEquations::new(layout.dim()),
-            pose: mean_pose.clone(),
-            mean_pose,
+            pose: problem.mean_pose.clone(),
             initialized: false,
-            base: base.clone(),
-            basis,
-            layout,
+            next: ctx.beta.clone(),
+            ctx,
             solver,
             ws,
             config,
-            next: beta,
+            problem,
         })
     }
 
     /// The β basis (names, template values, kinds).
     pub fn basis(&self) -> &ShapeBasis {
-        &self.basis
+        &self.problem.basis
     }
 
     /// The unknowns' layout (which β entries are estimated).
     pub fn layout(&self) -> &Layout {
-        &self.layout
+        &self.problem.layout
     }
 
     /// The settings.
@@ -317,7 +235,7 @@ impl OnlineCalibrator {
     /// Start the next frame from `pose` (e.g. the first frame's known pose, thesis §4.4.2);
     /// clears the temporal history. An error for a pose of the wrong length.
     pub fn set_pose(&mut self, pose: &Pose) -> Result<(), OnlineError> {
-        self.pose = Pose::from_values(&self.base.skeleton, pose.values.clone())?;
+        self.pose = Pose::from_values(&self.problem.base.skeleton, pose.values.clone())?;
         self.initialized = true;
         self.temporal.clear_history();
         Ok(())
@@ -326,13 +244,13 @@ impl OnlineCalibrator {
     /// The mean pose moved so that the model's sphere centroid sits 10 mm behind the points'
     /// centroid (the first frame without [`OnlineCalibrator::set_pose`]).
     fn placed_pose(&self, points: &[Vector3<f64>]) -> Pose {
-        let mut pose = self.mean_pose.clone();
+        let mut pose = self.problem.mean_pose.clone();
         let n = points.len().max(1) as f64;
         let target = points.iter().sum::<Vector3<f64>>() / n + Vector3::new(0.0, 0.0, 10.0);
         let posed = PosedSphereMesh::new(self.template(), &pose);
         let m = posed.spheres.len().max(1) as f64;
         let center = posed.spheres.iter().map(|s| s.center).sum::<Vector3<f64>>() / m;
-        let sk = &self.base.skeleton;
+        let sk = &self.problem.base.skeleton;
         for (name, d) in ["global_tx", "global_ty", "global_tz"]
             .iter()
             .zip((target - center).iter())
@@ -342,19 +260,6 @@ impl OnlineCalibrator {
             }
         }
         pose
-    }
-
-    /// Eq. 4.5 at the context's current linearization: the data terms' Gauss–Newton Hessian,
-    /// marginalized over the pose (not yet scaled by the measurement weight).
-    fn data_information(&mut self) -> Option<DMatrix<f64>> {
-        self.data_ne.clear();
-        self.data.accumulate(&self.ctx, &mut self.data_ne).ok()?;
-        self.data_ne.symmetrize();
-        let theta: Vec<usize> = (0..self.layout.num_dofs).collect();
-        let beta: Vec<usize> = (0..self.layout.active.len())
-            .map(|j| self.layout.beta_index(j))
-            .collect();
-        marginal_information(self.data_ne.lhs(), &theta, &beta)
     }
 
     /// The information (over the active β, per mm², scaled like a measurement) that `frame`
@@ -368,13 +273,16 @@ impl OnlineCalibrator {
         pose: &Pose,
     ) -> Option<DMatrix<f64>> {
         if frame.points.len() < self.config.min_points.max(1)
-            || pose.values.len() != self.layout.num_dofs
+            || pose.values.len() != self.problem.layout.num_dofs
         {
             return None;
         }
         self.ctx.tracking.set_frame(frame);
         self.ctx.tracking.update(pose, false).ok()?;
-        let h = self.data_information()? * self.config.measurement_weight;
+        let h = self
+            .problem
+            .data_information(&self.ctx, &mut self.data_ne)?
+            * self.config.measurement_weight;
         // Restore the tracked pose's linearization for anyone reading the context.
         let _ = self.ctx.tracking.update(&self.pose.clone(), false);
         h.iter().all(|v| v.is_finite()).then_some(h)
@@ -386,7 +294,7 @@ impl OnlineCalibrator {
     pub fn track(&mut self, frame: &PreprocessedFrame, index: u64, timestamp: f64) -> OnlineFrame {
         let start = Instant::now();
         let mut rec = HandRecord::for_frame(index, timestamp);
-        let k = self.layout.active.len();
+        let k = self.problem.layout.active.len();
         let mut frame_info = DMatrix::zeros(k, k);
         let mut solved = false;
         let finite_points = frame
@@ -407,44 +315,23 @@ impl OnlineCalibrator {
                 )
             });
             let saved = (self.ctx.beta.clone(), self.ctx.latent);
-            let e = &self.config.tracker.enabled;
-            let none = NoTerm;
-            let pose_prior: &dyn EnergyTerm<OnlineCtx> = match (&self.pose_prior, e.pose_prior) {
-                (Some(p), true) => p,
-                _ => &none,
-            };
-            let list: [(bool, &dyn EnergyTerm<OnlineCtx>); 8] = [
-                (true, &self.data),
-                (e.collision, &self.collision),
-                (e.temporal, &self.temporal),
-                (e.joint_limits, &self.limits),
-                (true, pose_prior),
-                (true, &self.prior),
-                (true, &self.validity),
-                (true, &self.iekf),
-            ];
-            let mut terms: [&dyn EnergyTerm<OnlineCtx>; 8] = [&none; 8];
-            let mut n = 0;
-            for (on, t) in list {
-                if on {
-                    terms[n] = t;
-                    n += 1;
-                }
-            }
+            let temporal = self.config.tracker.enabled.temporal;
+            let terms = self.problem.terms(
+                temporal.then_some(&self.temporal as &dyn EnergyTerm<OnlineCtx>),
+                Some(&self.iekf),
+            );
             let mut callback = ShapeCallback {
-                base: &self.base,
-                basis: &self.basis,
-                layout: &self.layout,
+                problem: &self.problem,
                 next: std::mem::take(&mut self.next),
                 rejected: 0,
             };
             let mut pose = self.pose.clone();
             let result = self.solver.solve(
                 &mut self.ws,
-                &self.base.skeleton,
+                &self.problem.base.skeleton,
                 &mut pose,
                 &mut self.ctx,
-                &terms[..n],
+                terms.as_slice(),
                 &mut callback,
             );
             self.next = callback.next;
@@ -456,7 +343,8 @@ impl OnlineCalibrator {
                 let t1 = Instant::now();
                 // Eq. 4.5 at the last linearization: the data terms' Gauss–Newton Hessian,
                 // marginalized over the pose.
-                if let Some(h) = self.data_information() {
+                let info = self.problem.data_information(&self.ctx, &mut self.data_ne);
+                if let Some(h) = info {
                     frame_info = h * self.config.measurement_weight;
                     solved = true;
                     self.pose = pose;
@@ -481,7 +369,8 @@ impl OnlineCalibrator {
         }
         // The estimators (§4.3.1–4.3.3).
         let t2 = Instant::now();
-        let mode = DVector::from_iterator(k, self.layout.active.iter().map(|&i| self.ctx.beta[i]));
+        let layout = &self.problem.layout;
+        let mode = DVector::from_iterator(k, layout.active.iter().map(|&i| self.ctx.beta[i]));
         if solved {
             match self.config.estimator {
                 Estimator::PerFrame => {
@@ -499,7 +388,7 @@ impl OnlineCalibrator {
             }
         }
         if self.ctx.dirty {
-            if let Ok(t) = self.basis.apply(&self.base, &self.ctx.beta) {
+            if let Ok(t) = self.problem.basis.apply(&self.problem.base, &self.ctx.beta) {
                 if self.ctx.tracking.set_template(t).is_ok() {
                     self.ctx.dirty = false;
                 }
@@ -507,9 +396,10 @@ impl OnlineCalibrator {
         }
         let frame_beta = self.ctx.beta.clone();
         let beta = self.estimate(&frame_beta);
-        let mut certainty = vec![0.0; self.basis.len()];
-        let mut frame_certainty = vec![0.0; self.basis.len()];
-        for (j, &i) in self.layout.active.iter().enumerate() {
+        let basis = &self.problem.basis;
+        let mut certainty = vec![0.0; basis.len()];
+        let mut frame_certainty = vec![0.0; basis.len()];
+        for (j, &i) in self.problem.layout.active.iter().enumerate() {
             certainty[i] = self.belief.information[(j, j)];
             frame_certainty[i] = frame_info[(j, j)];
         }
@@ -519,7 +409,7 @@ impl OnlineCalibrator {
         let posed = PosedSphereMesh::new(t, &self.pose);
         let names = t.skeleton.dofs().iter().map(|d| d.name.as_str());
         rec.set_pose(names, &self.pose.values, &posed.keypoints(t));
-        for ((name, &b), &c) in self.basis.names().zip(&beta).zip(&certainty) {
+        for ((name, &b), &c) in basis.names().zip(&beta).zip(&certainty) {
             rec.shape.insert(name.to_string(), b);
             rec.shape_certainty.insert(name.to_string(), c);
         }
@@ -539,14 +429,10 @@ impl OnlineCalibrator {
     /// bounds; `fallback` itself when that shape is not a valid model.
     fn estimate(&self, fallback: &[f64]) -> Vec<f64> {
         let mut beta = fallback.to_vec();
-        for (j, &i) in self.layout.active.iter().enumerate() {
-            let mut v = self.belief.mean[j];
-            if let Some([lo, hi]) = self.basis.params[i].limits {
-                v = v.clamp(lo, hi);
-            }
-            beta[i] = v;
+        for (j, &i) in self.problem.layout.active.iter().enumerate() {
+            beta[i] = self.belief.mean[j];
         }
-        if beta.iter().all(|v| v.is_finite()) && self.basis.apply(&self.base, &beta).is_ok() {
+        if self.problem.project(&mut beta) {
             beta
         } else {
             fallback.to_vec()

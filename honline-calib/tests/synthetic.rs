@@ -2,57 +2,14 @@
 //! cumulative estimator lowers E_β (Eq. 4.16) from the default template, straight fingers keep
 //! the phalanx lengths uncertain, and frames without a hand keep a valid template.
 
-use hand_model::kinematics::Pose;
-use hand_model::spheremesh::{default_right_hand, ShapeBasis, SphereMeshTemplate};
+mod common;
+
+use common::{pose, subject};
+use hand_model::spheremesh::{default_right_hand, ShapeBasis};
 use hmodel_spheremesh::synthetic::rendered_frame;
 use honline_calib::{beta_error, error_subset, Estimator, OnlineCalibrator, OnlineConfig};
-use rand::{Rng, SeedableRng};
 use sensor_io::preprocess::PreprocessedFrame;
 use sensor_io::Camera;
-
-/// A subject: the template's β with the error subset perturbed by ±`sigma` (relative).
-fn subject(base: &SphereMeshTemplate, sigma: f64, seed: u64) -> (Vec<f64>, SphereMeshTemplate) {
-    let basis = ShapeBasis::honline(base).unwrap();
-    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
-    let mut beta = basis.template_values();
-    for i in error_subset(&basis) {
-        beta[i] *= 1.0 + rng.random_range(-sigma..sigma);
-    }
-    let t = basis.apply(base, &beta).unwrap();
-    (beta, t)
-}
-
-/// Frame `k` of a sequence facing the camera: the fingers bend and stretch with per-finger
-/// phases (`bend`), or stay straight while the hand turns.
-fn pose(t: &SphereMeshTemplate, k: usize, bend: bool) -> Pose {
-    let sk = &t.skeleton;
-    let mut p = Pose::zeros(sk);
-    let phase = k as f64 * 0.15;
-    for d in sk.dofs() {
-        let name = d.name.as_str();
-        let i = sk.dof_index(name).unwrap();
-        p.values[i] = match name {
-            "global_tz" => 400.0,
-            "global_ty" => 30.0,
-            "global_rx" => 0.2 * (phase * 0.7).sin(),
-            "global_ry" => 0.3 * (phase * 0.5).sin(),
-            n if bend
-                && n.contains("flex")
-                && !n.starts_with("global")
-                && !n.starts_with("wrist") =>
-            {
-                let digit = ["thumb", "index", "middle", "ring", "pinky"]
-                    .iter()
-                    .position(|f| n.starts_with(f))
-                    .unwrap_or(0) as f64;
-                0.5 * (1.0 - (phase + digit * 0.9).cos())
-            }
-            _ => 0.0,
-        };
-    }
-    p.clamp_to_limits(sk);
-    p
-}
 
 struct Run {
     start_error: f64,

@@ -1,5 +1,6 @@
-//! `hands calibrate`: offline multi-frame calibration of the sphere-mesh template (thesis §3.4)
-//! from a recorded or synthetic sequence of the user's hand.
+//! `hands calibrate`: multi-frame calibration of the sphere-mesh template from a recorded or
+//! synthetic sequence of the user's hand — the Ch. 3 calibration (thesis §3.4, `spheremesh`)
+//! or the Ch. 4 batch baselines Offline-Hard / Offline-Soft (§4.3.4, `honline_calib`).
 
 use std::path::{Path, PathBuf};
 
@@ -16,27 +17,56 @@ use hand_model::kinematics::Pose;
 use hand_model::query::SphereMeshGeometry;
 use hand_model::render::preview::{write_preview_png, PreviewOptions};
 use hand_model::solver::PcaPrior;
-use hand_model::spheremesh::{PosedSphereMesh, SphereMeshTemplate};
+use hand_model::spheremesh::{PosedSphereMesh, ShapeBasis, SphereMeshTemplate};
 use hmodel_spheremesh::calibration::{
     calibrate, initialize_clouds, principal_frame, select_frames, split_forearm, Calibration,
     CalibrationConfig, CalibrationFrame, CloudSearch, IterationRecord,
 };
 use hmodel_spheremesh::{Tracker, TrackerConfig};
-use honline_calib::{guide, OnlineCalibrator, OnlineConfig};
+use honline_calib::{
+    calibrate_offline, guide, subsample, Offline, OfflineConfig, OnlineCalibrator, OnlineConfig,
+    SUBSAMPLING,
+};
 use image::{GenericImage, RgbImage};
 use nalgebra::Vector3;
 use sensor_io::io::write_atomic;
+use sensor_io::preprocess::PreprocessedFrame;
 
 use crate::methods::{ModelRenderer, SphereMeshRenderer};
 use crate::overlay;
 use crate::track::{for_each_frame, load_sphere_mesh, read_config};
 
+/// The calibration `hands calibrate` runs.
+#[derive(Copy, Clone, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum CalibrationMethod {
+    /// Ch. 3 (§3.4): the honline β and the rest orientations of the kinematic frames, jointly
+    /// with the chosen frames' poses (default frames: `--auto 8`).
+    Spheremesh,
+    /// Ch. 4 (§4.3.4, Eq. 4.12): Offline-Hard, one β shared by all chosen frames (default
+    /// frames: `--every 20`).
+    OfflineHard,
+    /// Ch. 4 (§4.3.4, Eq. 4.13): Offline-Soft, a β per frame tied to the common β by
+    /// ω_β‖β_n − β‖², started from per-frame solves (default frames: `--every 20`).
+    OfflineSoft,
+}
+
+impl CalibrationMethod {
+    /// The name users type.
+    fn name(self) -> &'static str {
+        match self {
+            Self::Spheremesh => "spheremesh",
+            Self::OfflineHard => "offline-hard",
+            Self::OfflineSoft => "offline-soft",
+        }
+    }
+}
+
 /// Calibrate the sphere-mesh template to a sequence or to complete scans.
 ///
 /// A sequence is tracked with the starting template, calibration frames are chosen
-/// (`--frames`, or `--auto N` by farthest-point sampling of the tracked poses), and the
-/// template's shape (honline β, rest orientations of the kinematic frames) is optimized jointly
-/// with those frames' poses. A folder of `.obj` scans (complete point clouds of one hand in
+/// (`--frames`, `--auto N` by farthest-point sampling of the tracked poses, or `--every N`, the
+/// first tracked frame of every N), and the template's shape is optimized jointly with those
+/// frames' poses by `--method`. A folder of `.obj` scans (complete point clouds of one hand in
 /// several poses, any unit) is calibrated from every scan: the unit is estimated (or given by
 /// `--units-per-mm`), the forearm cut off, the handedness and each scan's pose found by a
 /// hypothesis search (`hmodel_spheremesh::calibration::initialize_clouds`).
@@ -52,12 +82,20 @@ pub struct CalibrateArgs {
     /// against the starting template's).
     #[arg(long)]
     pub units_per_mm: Option<f64>,
+    /// The calibration: `spheremesh` (Ch. 3, thesis §3.4), `offline-hard` or `offline-soft`
+    /// (the Ch. 4 batch calibrations of §4.3.4, Eq. 4.12–4.13).
+    #[arg(long, value_enum, default_value = "spheremesh")]
+    pub method: CalibrationMethod,
     /// Calibrate from these frame positions (comma-separated).
-    #[arg(long, value_delimiter = ',', conflicts_with = "auto")]
+    #[arg(long, value_delimiter = ',', conflicts_with_all = ["auto", "every"])]
     pub frames: Option<Vec<usize>>,
-    /// Choose this many frames automatically (default 8 when `--frames` is not given).
-    #[arg(long)]
+    /// Choose this many frames automatically (the default for `spheremesh`, 8 frames).
+    #[arg(long, conflicts_with = "every")]
     pub auto: Option<usize>,
+    /// Choose the first tracked frame of every N (the default for the offline methods, N = 20:
+    /// the thesis' ≈ 1/20 sub-sampling).
+    #[arg(long)]
+    pub every: Option<usize>,
     /// Starting template: a sphere-mesh `.json` or `subject:<name>` (default: the default hand).
     #[arg(long)]
     pub template: Option<String>,
@@ -70,7 +108,9 @@ pub struct CalibrateArgs {
     /// the model, green 0 → red ≥ 10 mm).
     #[arg(long)]
     pub report: Option<PathBuf>,
-    /// Calibration settings (JSON of `CalibrationConfig`; missing fields keep their defaults).
+    /// Calibration settings (JSON of `CalibrationConfig` for `spheremesh`, of `OfflineConfig`
+    /// for the offline methods, whose `method` `--method` sets; missing fields keep their
+    /// defaults).
     #[arg(long)]
     pub config: Option<PathBuf>,
     /// Hand segmentation: auto, wristband, depth, presegmented.
@@ -99,10 +139,29 @@ const MIN_FRAMES: usize = 2;
 /// is reported as unconstrained (`Calibration::unconstrained`).
 const UNCONSTRAINED: f64 = 0.01;
 
+/// What a calibration method hands back to the command.
+struct Outcome {
+    template: SphereMeshTemplate,
+    poses: Vec<Pose>,
+    initial_energy: f64,
+    final_energy: f64,
+    iterations: usize,
+    seconds: f64,
+    /// Shape parameters the chosen frames barely constrain.
+    weak: Vec<String>,
+    /// The method's own records for `iterations.json`.
+    details: serde_json::Value,
+    /// Energy curves over the accepted steps.
+    series: Vec<Series>,
+}
+
 /// Run `hands calibrate`.
 pub fn run(args: CalibrateArgs) -> Result<()> {
     if args.out.extension().and_then(|e| e.to_str()) != Some("json") {
         bail!("--out must end in .json, got {}", args.out.display());
+    }
+    if args.every == Some(0) {
+        bail!("--every must be at least 1");
     }
     let base = match &args.template {
         Some(spec) => load_sphere_mesh(spec)?,
@@ -111,14 +170,19 @@ pub fn run(args: CalibrateArgs) -> Result<()> {
     if args.guide {
         return run_guide(&args, &base);
     }
-    let config: CalibrationConfig = read_config(args.config.as_deref())?;
     if let Some(scans) = scan_files(&args.sequence)? {
-        return run_scans(&args, &base, &config, &scans);
+        if args.method != CalibrationMethod::Spheremesh {
+            bail!(
+                "--method {} calibrates from a depth sequence; scans take the spheremesh calibration",
+                args.method.name()
+            );
+        }
+        return run_scans(&args, &base, &scans);
     }
     let prior = PcaPrior::project_default();
     let mut tracker = Tracker::new(&base, TrackerConfig::default(), Some(&prior))?;
     let sk = &base.skeleton;
-    let (mut frames, mut poses, mut usable) = (Vec::new(), Vec::new(), Vec::new());
+    let (mut poses, mut usable) = (Vec::new(), Vec::new());
     let read = for_each_frame(
         &args.sequence,
         &args.segmentation,
@@ -135,18 +199,21 @@ pub fn run(args: CalibrateArgs) -> Result<()> {
                     .map(|d| rec.pose.get(&d.name).copied().unwrap_or(0.0))
                     .collect(),
             });
-            frames.push(CalibrationFrame::depth(sf.pre));
             Ok(())
         },
     )?;
-    let chosen = match &args.frames {
-        Some(list) => {
+    let offline = args.method != CalibrationMethod::Spheremesh;
+    let chosen = match (&args.frames, args.every, args.auto) {
+        (Some(list), _, _) => {
             if let Some(&bad) = list.iter().find(|&&i| i >= read) {
                 bail!("--frames {bad} is beyond the sequence ({read} frames read)");
             }
             list.clone()
         }
-        None => select_frames(sk, &poses, |i| usable[i], args.auto.unwrap_or(8)),
+        (None, Some(n), _) => subsample(&usable, n),
+        (None, None, Some(n)) => select_frames(sk, &poses, |i| usable[i], n),
+        (None, None, None) if offline => subsample(&usable, SUBSAMPLING),
+        (None, None, None) => select_frames(sk, &poses, |i| usable[i], 8),
     };
     if chosen.len() < MIN_FRAMES {
         bail!(
@@ -154,18 +221,28 @@ pub fn run(args: CalibrateArgs) -> Result<()> {
             chosen.len()
         );
     }
-    let cal_frames: Vec<CalibrationFrame> = chosen.iter().map(|&i| frames[i].clone()).collect();
+    let frames = read_chosen(&args, &chosen)?;
     let init: Vec<Pose> = chosen.iter().map(|&i| poses[i].clone()).collect();
-    let cal = calibrate(&base, &cal_frames, &init, &config)?;
-    let described = format!("frames {chosen:?} of {read}");
-    finish(&args, &cal, &described)?;
+    let mut outcome = match args.method {
+        CalibrationMethod::Spheremesh => spheremesh(&args, &base, &frames, &init)?,
+        CalibrationMethod::OfflineHard => {
+            offline_batch(&args, &base, &frames, &init, &prior, Offline::Hard)?
+        }
+        CalibrationMethod::OfflineSoft => {
+            offline_batch(&args, &base, &frames, &init, &prior, Offline::Soft)?
+        }
+    };
+    if let serde_json::Value::Object(details) = &mut outcome.details {
+        details.insert("frames".into(), serde_json::json!(chosen));
+    }
+    finish(&args, &outcome, &format!("frames {chosen:?} of {read}"))?;
     if let Some(dir) = &args.report {
         write_overlays(
             &args,
             dir,
             &chosen,
             (&base, &init),
-            (&cal.template, &cal.poses),
+            (&outcome.template, &outcome.poses),
         )?;
         eprintln!("report → {}", dir.display());
     }
@@ -246,56 +323,50 @@ fn median(v: &[f64]) -> f64 {
 /// Save the calibrated template, print the outcome (energies, weakly constrained parameters)
 /// and, with `--report`, write `iterations.json` and `energy.svg`; `described` names the data
 /// calibrated from.
-fn finish(args: &CalibrateArgs, cal: &Calibration, described: &str) -> Result<()> {
-    cal.template
+fn finish(args: &CalibrateArgs, outcome: &Outcome, described: &str) -> Result<()> {
+    outcome
+        .template
         .save(&args.out)
         .with_context(|| format!("writing {}", args.out.display()))?;
     eprintln!(
-        "calibrated from {described}: energy {:.1} → {:.1} in {} iterations ({:.2} s) → {}",
-        cal.initial_energy,
-        cal.best_energy(),
-        cal.iterations.len(),
-        cal.seconds,
+        "calibrated ({}) from {described}: energy {:.1} → {:.1} in {} iterations ({:.2} s) → {}",
+        args.method.name(),
+        outcome.initial_energy,
+        outcome.final_energy,
+        outcome.iterations,
+        outcome.seconds,
         args.out.display()
     );
-    let weak = cal.unconstrained(UNCONSTRAINED);
-    if !weak.is_empty() {
+    if !outcome.weak.is_empty() {
         eprintln!(
             "warning: the data barely constrain {} shape parameter(s); they stay near the starting template: {}",
-            weak.len(),
-            weak.join(", ")
+            outcome.weak.len(),
+            outcome.weak.join(", ")
         );
     }
     let Some(dir) = &args.report else {
         return Ok(());
     };
     std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
-    let json = serde_json::to_string_pretty(&serde_json::json!({
+    let mut json = serde_json::json!({
+        "method": args.method.name(),
         "data": described,
-        "iterations": cal.iterations,
-        "information": cal.information,
-        "unconstrained": weak,
-    }))?;
-    write_atomic(&dir.join("iterations.json"), json.as_bytes())?;
-    let series = |name: &str, f: &dyn Fn(&IterationRecord) -> f64| Series {
-        label: name.into(),
-        points: cal
-            .iterations
-            .iter()
-            .enumerate()
-            .filter(|(_, r)| r.accepted)
-            .map(|(i, r)| (i as f64, f(r)))
-            .collect(),
-    };
+        "unconstrained": outcome.weak,
+    });
+    if let (Some(out), serde_json::Value::Object(details)) =
+        (json.as_object_mut(), outcome.details.clone())
+    {
+        out.extend(details);
+    }
+    write_atomic(
+        &dir.join("iterations.json"),
+        serde_json::to_string_pretty(&json)?.as_bytes(),
+    )?;
     let svg = line_plot_svg(
         "calibration energy (accepted steps)",
         "iteration",
         "energy",
-        &[
-            series("total", &|r| r.energy),
-            series("d2m", &|r| r.d2m),
-            series("m2d", &|r| r.m2d),
-        ],
+        &outcome.series,
         None,
     )?;
     write_atomic(&dir.join("energy.svg"), svg.as_bytes())?;
@@ -334,12 +405,7 @@ fn estimate_units(base: &SphereMeshTemplate, scans: &[Vec<Vector3<f64>>]) -> Res
 }
 
 /// `hands calibrate <folder of .obj scans>` (see [`CalibrateArgs`]).
-fn run_scans(
-    args: &CalibrateArgs,
-    base: &SphereMeshTemplate,
-    config: &CalibrationConfig,
-    files: &[PathBuf],
-) -> Result<()> {
+fn run_scans(args: &CalibrateArgs, base: &SphereMeshTemplate, files: &[PathBuf]) -> Result<()> {
     if files.len() < MIN_FRAMES {
         bail!(
             "{} scan(s) in {}; calibration needs at least {MIN_FRAMES} scans in different poses",
@@ -391,7 +457,8 @@ fn run_scans(
             .collect::<Vec<_>>()
     );
     let poses: Vec<Pose> = init.poses.iter().map(|p| p.pose.clone()).collect();
-    let cal = calibrate(&init.template, &init.frames, &poses, config)?;
+    let config: CalibrationConfig = read_config(args.config.as_deref())?;
+    let cal = Outcome::from(calibrate(&init.template, &init.frames, &poses, &config)?);
     let before = scan_d2m(&init.template, &poses, &init.frames)?;
     let after = scan_d2m(&cal.template, &cal.poses, &init.frames)?;
     for ((f, b), a) in files.iter().zip(&before).zip(&after) {
@@ -464,6 +531,159 @@ fn cloud_views(points: &[Vector3<f64>], distances: &[Option<f64>]) -> RgbImage {
         }
     }
     image
+}
+
+/// The preprocessed frames at the `chosen` positions, in that order (a second pass over the
+/// sequence, up to the last chosen frame: the tracking pass keeps no depth images).
+fn read_chosen(args: &CalibrateArgs, chosen: &[usize]) -> Result<Vec<PreprocessedFrame>> {
+    let mut out: Vec<Option<PreprocessedFrame>> = vec![None; chosen.len()];
+    let last = chosen.iter().max().map_or(0, |&m| m + 1);
+    for_each_frame(
+        &args.sequence,
+        &args.segmentation,
+        args.points,
+        Some(args.max_frames.map_or(last, |m| m.min(last))),
+        "read",
+        |sf| {
+            for (slot, _) in out
+                .iter_mut()
+                .zip(chosen)
+                .filter(|(_, &c)| c == sf.position)
+            {
+                *slot = Some(sf.pre.clone());
+            }
+            Ok(())
+        },
+    )?;
+    out.into_iter()
+        .zip(chosen)
+        .map(|(f, &c)| f.with_context(|| format!("frame {c} could not be read again")))
+        .collect()
+}
+
+/// One energy curve over the accepted steps (`(iteration, energy)`).
+fn series(label: &str, points: impl Iterator<Item = (usize, f64)>) -> Series {
+    Series {
+        label: label.into(),
+        points: points.map(|(i, e)| (i as f64, e)).collect(),
+    }
+}
+
+/// The Ch. 3 calibration (thesis §3.4) of sequence frames.
+fn spheremesh(
+    args: &CalibrateArgs,
+    base: &SphereMeshTemplate,
+    frames: &[PreprocessedFrame],
+    init: &[Pose],
+) -> Result<Outcome> {
+    let config: CalibrationConfig = read_config(args.config.as_deref())?;
+    let cal_frames: Vec<CalibrationFrame> = frames.iter().map(CalibrationFrame::depth).collect();
+    Ok(Outcome::from(calibrate(base, &cal_frames, init, &config)?))
+}
+
+impl From<Calibration> for Outcome {
+    fn from(cal: Calibration) -> Self {
+        type Part = fn(&IterationRecord) -> f64;
+        let parts: [(&str, Part); 3] = [
+            ("total", |r| r.energy),
+            ("d2m", |r| r.d2m),
+            ("m2d", |r| r.m2d),
+        ];
+        let accepted = || {
+            cal.iterations
+                .iter()
+                .enumerate()
+                .filter(|(_, r)| r.accepted)
+        };
+        Outcome {
+            series: parts
+                .iter()
+                .map(|(name, f)| series(name, accepted().map(|(i, r)| (i, f(r)))))
+                .collect(),
+            weak: cal
+                .unconstrained(UNCONSTRAINED)
+                .into_iter()
+                .map(String::from)
+                .collect(),
+            details: serde_json::json!({
+                "iterations": cal.iterations,
+                "information": cal.information,
+            }),
+            initial_energy: cal.initial_energy,
+            final_energy: cal.best_energy(),
+            iterations: cal.iterations.len(),
+            seconds: cal.seconds,
+            template: cal.template,
+            poses: cal.poses,
+        }
+    }
+}
+
+/// Offline-Hard or Offline-Soft (thesis §4.3.4) with the tracker's PCA pose prior.
+fn offline_batch(
+    args: &CalibrateArgs,
+    base: &SphereMeshTemplate,
+    frames: &[PreprocessedFrame],
+    init: &[Pose],
+    prior: &PcaPrior,
+    method: Offline,
+) -> Result<Outcome> {
+    let mut config: OfflineConfig = read_config(args.config.as_deref())?;
+    config.method = method;
+    let cal = calibrate_offline(base, frames, init, &config, Some(prior))?;
+    let basis = ShapeBasis::honline(base)?;
+    let active = config.frame.subset.indices(&basis);
+    // Unconstrained: active entries whose data information is below UNCONSTRAINED of the
+    // active entries' median.
+    let mut sorted: Vec<f64> = active.iter().map(|&i| cal.certainty[i]).collect();
+    sorted.sort_by(f64::total_cmp);
+    let median = sorted.get(sorted.len() / 2).copied().unwrap_or(0.0);
+    let names: Vec<&str> = basis.names().collect();
+    let by_name = |values: &[f64]| -> serde_json::Map<String, serde_json::Value> {
+        names
+            .iter()
+            .zip(values)
+            .map(|(n, v)| (n.to_string(), serde_json::json!(v)))
+            .collect()
+    };
+    let accepted = || {
+        cal.iterations
+            .iter()
+            .enumerate()
+            .filter(|(_, r)| r.accepted)
+    };
+    let mut curves = vec![series("total", accepted().map(|(i, r)| (i, r.energy)))];
+    let labels: Vec<&str> = cal
+        .iterations
+        .iter()
+        .find(|r| r.accepted)
+        .map(|r| r.terms.iter().map(|(n, _)| n.as_str()).collect())
+        .unwrap_or_default();
+    for (k, label) in labels.iter().enumerate() {
+        curves.push(series(
+            label,
+            accepted().filter_map(|(i, r)| r.terms.get(k).map(|t| (i, t.1))),
+        ));
+    }
+    Ok(Outcome {
+        series: curves,
+        weak: active
+            .iter()
+            .filter(|&&i| cal.certainty[i] < UNCONSTRAINED * median)
+            .map(|&i| names[i].to_string())
+            .collect(),
+        details: serde_json::json!({
+            "iterations": cal.iterations,
+            "shape": by_name(&cal.beta),
+            "shape_certainty": by_name(&cal.certainty),
+        }),
+        initial_energy: cal.initial_energy,
+        final_energy: cal.final_energy(),
+        iterations: cal.iterations.len(),
+        seconds: cal.seconds,
+        template: cal.template,
+        poses: cal.poses,
+    })
 }
 
 /// One image per chosen frame: the overlay of the starting template at its initial pose beside

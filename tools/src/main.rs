@@ -67,9 +67,10 @@ enum Command {
         after_help = "Example: hands compare seq.mcap --methods cylinders,spheremesh --out report/"
     )]
     Compare(compare::CompareArgs),
-    /// Calibrate the sphere-mesh template to a sequence of the user's hand (thesis §3.4).
+    /// Calibrate the sphere-mesh template to a sequence of the user's hand (thesis §3.4; the
+    /// Ch. 4 batch baselines Offline-Hard/Soft of §4.3.4 with `--method`).
     #[command(
-        after_help = "Example: hands calibrate seq.mcap --auto 8 --out me.json --report calib/"
+        after_help = "Examples:\n  hands calibrate seq.mcap --auto 8 --out me.json --report calib/\n  hands calibrate seq.mcap --method offline-soft --every 20 --out me.json"
     )]
     Calibrate(calibrate::CalibrateArgs),
     /// Write a reproduction report (markdown + SVG plots) from synthetic ground truth.

@@ -696,6 +696,86 @@ fn bench_rejects_bad_arguments_clearly() {
     }
 }
 
+/// `hands track <seq> --model spheremesh [--template t]`'s mean keypoint error (mm) against the
+/// sequence's ground truth (the track is written into `dir`).
+fn keypoint_error(seq: &std::path::Path, template: Option<&PathBuf>, dir: &std::path::Path) -> f64 {
+    let s = |p: &std::path::Path| p.to_str().expect("utf8").to_string();
+    let mut args = vec![
+        "track".to_string(),
+        s(seq),
+        "--model".into(),
+        "spheremesh".into(),
+    ];
+    if let Some(t) = template {
+        args.extend(["--template".into(), s(t)]);
+    }
+    args.extend(["--out".into(), s(&dir.join("t.jsonl"))]);
+    let refs: Vec<&str> = args.iter().map(String::as_str).collect();
+    let (ok, text) = hands(&refs);
+    assert!(ok, "{text}");
+    let line = text
+        .lines()
+        .find(|l| l.contains("mean keypoint error"))
+        .expect("ground truth line");
+    line.split("error ")
+        .nth(1)
+        .and_then(|r| r.split(' ').next())
+        .and_then(|v| v.parse().ok())
+        .expect("number")
+}
+
+/// `hands synth --motion calibration --subject random [--seed seed]` of `frames` frames into
+/// `seq`.
+fn synth_random_subject(seq: &std::path::Path, seed: Option<u64>, frames: usize) {
+    let (seed, frames) = (seed.map(|v| v.to_string()), frames.to_string());
+    let mut args = vec![
+        "synth",
+        "--motion",
+        "calibration",
+        "--subject",
+        "random",
+        "--frames",
+        &frames,
+        "--out",
+        seq.to_str().expect("utf8"),
+    ];
+    if let Some(seed) = &seed {
+        args.extend(["--seed", seed]);
+    }
+    let (ok, text) = hands(&args);
+    assert!(ok, "{text}");
+}
+
+/// `hands calibrate <seq> <choice…> --out <me> --report <report>` must succeed; its output.
+fn calibrate_ok(
+    seq: &std::path::Path,
+    me: &std::path::Path,
+    report: &std::path::Path,
+    choice: &[&str],
+) -> String {
+    let s = |p: &std::path::Path| p.to_str().expect("utf8").to_string();
+    let (seq, me, report) = (s(seq), s(me), s(report));
+    let mut args = vec!["calibrate", seq.as_str()];
+    args.extend(choice);
+    args.extend(["--out", me.as_str(), "--report", report.as_str()]);
+    let (ok, text) = hands(&args);
+    assert!(ok, "{text}");
+    text
+}
+
+/// The calibrated template `me` tracks its sequence with a lower keypoint error than the
+/// default hand.
+fn assert_beats_the_default(seq: &std::path::Path, me: &PathBuf, dir: &std::path::Path) {
+    let (calibrated, default) = (
+        keypoint_error(seq, Some(me), dir),
+        keypoint_error(seq, None, dir),
+    );
+    assert!(
+        calibrated < default,
+        "calibrated {calibrated} mm vs default {default} mm"
+    );
+}
+
 /// Issue 6 item 4: `hands calibrate` writes a template that `hands track --template` reads and
 /// that fits its subject better than the default hand; bad frame choices fail clearly.
 #[test]
@@ -703,33 +783,9 @@ fn calibrate_writes_a_template_the_tracker_reads() {
     let d = tmp("calibrate");
     let s = |p: &PathBuf| p.to_str().expect("utf8").to_string();
     let seq = d.join("cal.mcap");
-    let (ok, text) = hands(&[
-        "synth",
-        "--motion",
-        "calibration",
-        "--subject",
-        "random",
-        "--seed",
-        "3",
-        "--frames",
-        "60",
-        "--out",
-        &s(&seq),
-    ]);
-    assert!(ok, "{text}");
-    let me = d.join("me.json");
-    let report = d.join("report");
-    let (ok, text) = hands(&[
-        "calibrate",
-        &s(&seq),
-        "--auto",
-        "4",
-        "--out",
-        &s(&me),
-        "--report",
-        &s(&report),
-    ]);
-    assert!(ok, "{text}");
+    synth_random_subject(&seq, Some(3), 60);
+    let (me, report) = (d.join("me.json"), d.join("report"));
+    calibrate_ok(&seq, &me, &report, &["--auto", "4"]);
     assert!(report.join("iterations.json").exists() && report.join("energy.svg").exists());
     let overlays: Vec<_> = std::fs::read_dir(&report)
         .expect("report folder")
@@ -745,38 +801,7 @@ fn calibrate_writes_a_template_the_tracker_reads() {
         .expect("overlay png")
         .to_rgb8();
     assert_eq!(image.width(), 2 * 320, "before and after side by side");
-    let error = |template: Option<&PathBuf>| {
-        let out = d.join("t.jsonl");
-        let mut args = vec![
-            "track".to_string(),
-            s(&seq),
-            "--model".into(),
-            "spheremesh".into(),
-        ];
-        if let Some(t) = template {
-            args.extend(["--template".into(), s(t)]);
-        }
-        args.extend(["--out".into(), s(&out)]);
-        let refs: Vec<&str> = args.iter().map(String::as_str).collect();
-        let (ok, text) = hands(&refs);
-        assert!(ok, "{text}");
-        let line = text
-            .lines()
-            .find(|l| l.contains("mean keypoint error"))
-            .expect("ground truth line");
-        let mm: f64 = line
-            .split("error ")
-            .nth(1)
-            .and_then(|r| r.split(' ').next())
-            .and_then(|v| v.parse().ok())
-            .expect("number");
-        mm
-    };
-    let (calibrated, default) = (error(Some(&me)), error(None));
-    assert!(
-        calibrated < default,
-        "calibrated {calibrated} mm vs default {default} mm"
-    );
+    assert_beats_the_default(&seq, &me, &d);
     let out = s(&d.join("x.json"));
     assert_fails_clearly(
         &["calibrate", &s(&seq), "--frames", "1", "--out", &out],
@@ -792,6 +817,57 @@ fn calibrate_writes_a_template_the_tracker_reads() {
     );
 }
 
+/// Issue 8, "Offline-Hard and Offline-Soft batch calibration": `hands calibrate --method
+/// offline-soft` on frames sub-sampled from a synthetic sequence writes a template that
+/// `hands track --template` reads and that fits its subject better than the default hand, with
+/// a report; bad method and frame choices fail clearly.
+#[test]
+fn calibrate_offline_soft_writes_a_template_the_tracker_reads() {
+    let d = tmp("offline");
+    let s = |p: &PathBuf| p.to_str().expect("utf8").to_string();
+    let seq = d.join("cal.mcap");
+    synth_random_subject(&seq, Some(5), 40);
+    let (me, report) = (d.join("me.json"), d.join("report"));
+    let text = calibrate_ok(
+        &seq,
+        &me,
+        &report,
+        &["--method", "offline-soft", "--every", "8"],
+    );
+    assert!(
+        text.contains("calibrated (offline-soft) from frames"),
+        "{text}"
+    );
+    let json: serde_json::Value = serde_json::from_str(
+        &std::fs::read_to_string(report.join("iterations.json")).expect("iterations.json"),
+    )
+    .expect("json");
+    assert_eq!(json["method"], "offline-soft");
+    assert_eq!(json["frames"].as_array().expect("frames").len(), 5);
+    let certainty = json["shape_certainty"].as_object().expect("certainty");
+    assert_eq!(certainty.len(), 75);
+    assert!(certainty
+        .values()
+        .all(|v| v.as_f64().is_some_and(|c| c.is_finite() && c >= 0.0)));
+    assert!(report.join("energy.svg").exists());
+    assert_beats_the_default(&seq, &me, &d);
+    let out = s(&d.join("x.json"));
+    let seq = s(&seq);
+    for (args, needle) in [
+        (
+            vec!["--method", "offline-hard", "--frames", "3"],
+            "at least 2",
+        ),
+        (vec!["--method", "offline-soft", "--every", "0"], "--every"),
+        (vec!["--method", "offline"], "offline-soft"),
+        (vec!["--every", "8", "--auto", "4"], "--auto"),
+    ] {
+        let mut all = vec!["calibrate", seq.as_str(), "--out", out.as_str()];
+        all.extend(&args);
+        assert_fails_clearly(&all, needle);
+    }
+}
+
 /// Issue 8: `hands track --calibrate online` on a random subject writes β and its certainty
 /// per frame and prints the final shape; bad `--calibrate` values fail clearly; `compare` runs
 /// the `online` method and `eval` renders its track with the recorded shapes.
@@ -800,18 +876,7 @@ fn track_calibrate_online_writes_the_shape_per_frame() {
     let d = tmp("online");
     let s = |p: &PathBuf| p.to_str().expect("utf8").to_string();
     let seq = d.join("seq");
-    let (ok, text) = hands(&[
-        "synth",
-        "--motion",
-        "calibration",
-        "--subject",
-        "random",
-        "--frames",
-        "40",
-        "--out",
-        &s(&seq),
-    ]);
-    assert!(ok, "{text}");
+    synth_random_subject(&seq, None, 40);
     let track = d.join("track.jsonl");
     let (ok, text) = hands(&[
         "track",

@@ -1,7 +1,9 @@
 //! Offline multi-frame calibration of the sphere-mesh template (thesis §3.4): the shape
 //! unknowns and their Jacobians ([`ShapeSpace`]) and the joint LM over all frames
-//! ([`calibrate`]) and its initialization from complete scans ([`initialize_clouds`]); the per-frame data rows over pose and shape ([`ShapeRows`]) that the
-//! online calibration of `honline-calib` reuses.
+//! ([`calibrate`]) and its initialization from complete scans ([`initialize_clouds`]); the
+//! per-frame data rows over pose and shape ([`ShapeRows`], reused by the online and offline
+//! calibrations of `honline-calib`) and the block-arrow normal equations of a multi-frame
+//! calibration ([`BlockArrow`], reused by the offline ones).
 
 mod block;
 mod cloud;
@@ -10,6 +12,7 @@ mod select;
 mod shape;
 mod solve;
 
+pub use block::{BlockArrow, Unknown};
 pub use cloud::{
     initialize_cloud_pose, initialize_clouds, place_pose, principal_frame, split_forearm,
     CloudInit, CloudPose, CloudSearch, ForearmSplit,

@@ -925,7 +925,7 @@ impl Damped<'_> {
         }
         let delta = match self.solver {
             LinearSolver::BlockArrow => {
-                super::block::block_arrow_solve(&a, &b, self.frames, self.nd)?
+                super::block::BlockArrow::from_dense(&a, &b, self.frames, self.nd)?.solve()?
             }
             LinearSolver::Dense => a.cholesky()?.solve(&b),
         };
