@@ -19,7 +19,7 @@ use sensor_io::preprocess::PreprocessedFrame;
 use sensor_io::record::HandRecord;
 use serde::{Deserialize, Serialize};
 
-use crate::filter::{marginal_information, Estimator, ShapeBelief};
+use crate::filter::{marginal_certainty, marginal_information, Estimator, ShapeBelief};
 use crate::shape::ShapeSubset;
 use crate::terms::{
     finger_order_constraints, IekfPrior, Layout, Lifted, OnlineCtx, ShapeData, ShapePrior,
@@ -102,6 +102,14 @@ pub struct OnlineFrame {
     /// The per-frame certainty: the diagonal of Σ*_n⁻¹ (scaled by
     /// [`OnlineConfig::measurement_weight`]; 0 when the frame was not solved).
     pub frame_certainty: Vec<f64>,
+    /// The cumulative marginal certainty `1 / diag(Σ̂_n)` (Fig. 4.6; per mm², 0 for inactive
+    /// entries): unlike [`OnlineFrame::certainty`] it stays low for two phalanges of a straight
+    /// finger whose sum alone is known.
+    pub marginal_certainty: Vec<f64>,
+    /// The per-frame marginal certainty `1 / diag(Σ*_n)` (Fig. 4.6; Σ*_n⁻¹ scaled as
+    /// [`OnlineFrame::frame_certainty`], with [`OnlineConfig::initial_information`] as a ridge
+    /// for what the frame does not see; 0 when the frame was not solved).
+    pub frame_marginal_certainty: Vec<f64>,
     /// Whether the frame was solved.
     pub solved: bool,
 }
@@ -189,6 +197,8 @@ pub struct OnlineCalibrator {
     validity: ShapeValidity,
     iekf: IekfPrior,
     collision: Lifted<Collision>,
+    /// The β whose rest pose gave the collision term its rest overlaps.
+    collision_beta: Vec<f64>,
     limits: JointLimits,
     temporal: Temporal,
     pose_prior: Option<PosePrior>,
@@ -253,6 +263,7 @@ impl OnlineCalibrator {
             validity: ShapeValidity::new(finger_order_constraints(&basis), &layout, config.valid),
             iekf: IekfPrior::new(&layout),
             collision: Lifted(Collision::new(base, tc.collision.clone())),
+            collision_beta: beta.clone(),
             limits: JointLimits::new(sk, &tc.joint_limits),
             temporal: Temporal::new(sphere_mesh_points(base), &tc.temporal),
             pose_prior,
@@ -370,6 +381,7 @@ impl OnlineCalibrator {
                     self.belief.information.clone(),
                 )
             });
+            self.refresh_collision();
             let saved = (self.ctx.beta.clone(), self.ctx.latent);
             let e = &self.config.tracker.enabled;
             let none = NoTerm;
@@ -484,9 +496,19 @@ impl OnlineCalibrator {
         let beta = self.estimate(&frame_beta);
         let mut certainty = vec![0.0; self.basis.len()];
         let mut frame_certainty = vec![0.0; self.basis.len()];
+        let mut marginal = vec![0.0; self.basis.len()];
+        let mut frame_marginal = vec![0.0; self.basis.len()];
+        let cumulative = self.belief.marginal_certainty();
+        let per_frame = if solved {
+            marginal_certainty(&frame_info, self.config.initial_information)
+        } else {
+            vec![0.0; k]
+        };
         for (j, &i) in self.layout.active.iter().enumerate() {
             certainty[i] = self.belief.information[(j, j)];
             frame_certainty[i] = frame_info[(j, j)];
+            marginal[i] = cumulative.get(j).copied().unwrap_or(0.0);
+            frame_marginal[i] = per_frame.get(j).copied().unwrap_or(0.0);
         }
         rec.timing_us
             .insert("filter".into(), t2.elapsed().as_secs_f64() * 1e6);
@@ -506,7 +528,23 @@ impl OnlineCalibrator {
             frame_beta,
             certainty,
             frame_certainty,
+            marginal_certainty: marginal,
+            frame_marginal_certainty: frame_marginal,
             solved,
+        }
+    }
+
+    /// Rebuild the collision term on the current shape when β moved since it was built: the
+    /// term tolerates the overlap that the model's pills have at the rest pose (a sphere-mesh
+    /// approximates soft tissue with overlapping pills), and that overlap belongs to the shape.
+    /// Kept at the starting template's, it would count the estimated shape's own rest geometry
+    /// (thicker fingers touching at rest) as penetration, push the fingers apart and, through
+    /// the data term, the radii down.
+    fn refresh_collision(&mut self) {
+        if self.collision_beta != self.ctx.beta {
+            let params = self.config.tracker.collision.clone();
+            self.collision = Lifted(Collision::new(self.ctx.tracking.template(), params));
+            self.collision_beta.clone_from(&self.ctx.beta);
         }
     }
 

@@ -188,7 +188,7 @@ pub fn split_forearm(points: &[Vector3<f64>]) -> Option<ForearmSplit> {
             (l.min(x), h.max(x))
         });
     let width = (hi - lo) / PROFILE_BINS as f64;
-    if !(width > 0.0) {
+    if width.is_nan() || width <= 0.0 {
         return None;
     }
     let bin = |x: f64| (((x - lo) / width) as usize).min(PROFILE_BINS - 1);
