@@ -13,8 +13,18 @@
 //!   rises with the bending and the lengths converge; the figure is written as SVG.
 //! - Tracking with online calibration against tracking with the subject's true template.
 //!
-//! The full-size run (15 draws per σ, 20 s, KF and per-frame on 5 draws):
-//! `cargo test --release -p eval --test ch4_acceptance -- --ignored --nocapture full_size`.
+//! CI checks one draw per σ (10 s); the full-size run (15 draws per σ, 20 s, KF and per-frame
+//! on 5 draws; ~25 min on two cores) is
+//! `cargo test --release -p eval --test ch4_acceptance -- --ignored --nocapture full_size`, and
+//! the same under the ToF sensor model `… -- --ignored --nocapture fig_4_7_tof`.
+//!
+//! Status (full-size run, see the issue-8 note for the tables): the IEKF target holds at
+//! σ = 0.1 and 0.2 but not at σ ≥ 0.3 on the mean of 15 draws (draws whose neighbouring
+//! phalanges are perturbed in opposite directions by ~2σ land in a local minimum with the
+//! joint between them misplaced); the split KF reaches lower E_β than the IEKF on these
+//! noise-free sequences; under ToF noise E_β ends above 1 mm even at σ = 0.1 (the radii come
+//! out thin); tracking with the online estimate does not come within 10 % of tracking with
+//! the true template (the CI tests guard the levels reached instead).
 
 use std::sync::OnceLock;
 
@@ -76,11 +86,15 @@ impl Draw {
 }
 
 fn draw(sigma: f64, seed: u64, estimator: Estimator, frames: usize) -> Draw {
+    draw_with(sigma, seed, estimator, frames, "none")
+}
+
+fn draw_with(sigma: f64, seed: u64, estimator: Estimator, frames: usize, noise: &str) -> Draw {
     let truth = perturbed_subject(sigma, seed).unwrap();
     let motion = CalibrationMotion::new(&default_right_hand().skeleton, 0.0, seed);
     let t = std::time::Instant::now();
     let r = run_online(
-        &spec("none", frames, seed),
+        &spec(noise, frames, seed),
         &truth,
         &motion,
         config(estimator),
@@ -101,7 +115,7 @@ fn draw(sigma: f64, seed: u64, estimator: Estimator, frames: usize) -> Draw {
         ms_per_frame: t.elapsed().as_secs_f64() * 1e3 / frames as f64,
     };
     println!(
-        "fig 4.7 σ={:.1} draw {} {}: E_β {:.3} → {:.3} mm (thesis M {:.3}), keypoints last third {:.2} mm, converged {}, {:.1} ms/frame",
+        "fig 4.7 {noise} σ={:.1} draw {} {}: E_β {:.3} → {:.3} mm (thesis M {:.3}), keypoints last third {:.2} mm, converged {}, {:.1} ms/frame",
         d.sigma, d.seed, d.estimator, d.start, d.end, d.end_m, d.keypoints, d.converged(), d.ms_per_frame
     );
     d
@@ -349,6 +363,16 @@ fn tracking_with_online_calibration_noise_free() {
 #[test]
 fn tracking_with_online_calibration_tof() {
     check_tracking("tof");
+}
+
+/// Fig. 4.7 under the ToF sensor model (one draw per σ, 10 s): what noise does to the
+/// estimate. Run by hand.
+#[test]
+#[ignore]
+fn fig_4_7_tof() {
+    for sigma in [0.1, 0.2, 0.3] {
+        draw_with(sigma, 0, Estimator::Iekf, 300, "tof");
+    }
 }
 
 /// Runs `jobs` on `THREADS` (default 2) threads, results in job order.
