@@ -12,7 +12,9 @@
 //! - [`real_frame`]: the sphere-mesh model fitted to one real depth frame without ground truth,
 //!   and the documented mapping of its keypoints to NYU's 14 joints;
 //! - [`plot`]: SVG line plots for reports, including the papers' "% frames with error < ε";
-//! - [`synthetic`]: scoring any tracker on a synthetic sequence with exact ground truth.
+//! - [`synthetic`]: scoring any tracker on a synthetic sequence with exact ground truth;
+//! - [`online`]: the synthetic experiments of the online calibration (thesis §4.4.2–4.4.3):
+//!   σ-perturbed subjects, a teaser-like motion with an optional straight phase, runners.
 //!
 //! Still to come (issue 7): `hands eval|compare|demo`.
 
@@ -20,6 +22,7 @@ pub mod benchmarks;
 pub mod depth_metrics;
 pub mod error;
 pub mod markers;
+pub mod online;
 pub mod plot;
 pub mod real_frame;
 pub mod shape_error;

@@ -56,11 +56,22 @@ impl Default for SyntheticSpec {
     }
 }
 
+/// A pose function of time (s), writing into the pose.
+type PoseFn = Box<dyn FnMut(f64, &mut Pose)>;
+
+/// Where the poses of a sequence come from.
+enum Poses {
+    /// A motion of the library.
+    Motion(Box<Motion>),
+    /// A pose function.
+    Custom(PoseFn),
+}
+
 /// A synthetic sequence ready to be tracked.
 pub struct SyntheticSequence {
     spec: SyntheticSpec,
     synth: Synthesizer,
-    motion: Motion,
+    poses: Poses,
     pose: Pose,
 }
 
@@ -130,19 +141,36 @@ impl SyntheticRun {
 impl SyntheticSequence {
     /// Build the subject, the motion and the renderer of `spec`.
     pub fn new(spec: SyntheticSpec) -> anyhow::Result<Self> {
+        let template = default_right_hand();
+        let subject = subject_by_name(&spec.subject, spec.seed)?;
+        let motion = MotionLibrary::by_name_for(&spec.motion, spec.seed, &template.skeleton)?;
+        Self::build(spec, &subject.beta, Poses::Motion(Box::new(motion)))
+    }
+
+    /// A sequence of the subject `beta` (honline β of the default template, empty = the
+    /// template itself) moving as `poses` says: `poses(t, pose)` writes the pose at time `t`
+    /// (s) into `pose` (sized for the default skeleton). `spec.subject` and `spec.motion` are
+    /// not used; the rest of `spec` is.
+    pub fn custom(
+        spec: SyntheticSpec,
+        beta: &[f64],
+        poses: impl FnMut(f64, &mut Pose) + 'static,
+    ) -> anyhow::Result<Self> {
+        Self::build(spec, beta, Poses::Custom(Box::new(poses)))
+    }
+
+    fn build(spec: SyntheticSpec, beta: &[f64], poses: Poses) -> anyhow::Result<Self> {
         anyhow::ensure!(
             spec.fps.is_finite() && spec.fps > 0.0,
             "fps must be positive, got {}",
             spec.fps
         );
         let template = default_right_hand();
-        let subject = subject_by_name(&spec.subject, spec.seed)?;
-        let motion = MotionLibrary::by_name_for(&spec.motion, spec.seed, &template.skeleton)?;
         let sensor = SensorModel::by_name(&spec.noise)
             .ok_or_else(|| anyhow::anyhow!("unknown noise model `{}`", spec.noise))?;
         let synth = Synthesizer::new(
             &template,
-            &subject.beta,
+            beta,
             SceneConfig {
                 camera: spec.camera.clone(),
                 sensor,
@@ -154,7 +182,7 @@ impl SyntheticSequence {
         Ok(Self {
             spec,
             synth,
-            motion,
+            poses,
             pose,
         })
     }
@@ -182,7 +210,10 @@ impl SyntheticSequence {
         let mut run = SyntheticRun::default();
         for k in 0..self.spec.frames {
             let t = k as f64 / self.spec.fps;
-            self.motion.pose_into(t, &mut self.pose);
+            match &mut self.poses {
+                Poses::Motion(m) => m.pose_into(t, &mut self.pose),
+                Poses::Custom(f) => f(t, &mut self.pose),
+            }
             let f = self.synth.render(k as u64, t, &self.pose)?;
             let t0 = Instant::now();
             pre.process(&f.frame, &self.spec.camera, &mut out)?;

@@ -139,10 +139,35 @@ impl ShapeBelief {
     /// the diagonal entry of the covariance"): low for two phalanges of a straight finger even
     /// when their sum is certain. Zeros when the information is singular.
     pub fn marginal_certainty(&self) -> Vec<f64> {
-        match self.information.clone().cholesky() {
-            Some(c) => c.inverse().diagonal().iter().map(|v| 1.0 / v).collect(),
-            None => vec![0.0; self.mean.len()],
-        }
+        marginal_certainty(&self.information, 0.0)
+    }
+}
+
+/// The marginal certainty `1 / diag((H + ridge·I)⁻¹)` of each entry of a Gaussian with
+/// information `H` (per mm²; Fig. 4.6 plots it for Σ*_n and Σ̂_n). `ridge` stands for a vague
+/// prior (e.g. [`crate::OnlineConfig::initial_information`]) where `H` alone is singular — a
+/// frame says nothing of a hidden finger. Zeros when the matrix is not positive definite or not
+/// finite.
+pub fn marginal_certainty(information: &DMatrix<f64>, ridge: f64) -> Vec<f64> {
+    let n = information.nrows();
+    let mut h = information.clone();
+    for i in 0..n.min(h.ncols()) {
+        h[(i, i)] += ridge;
+    }
+    match h.cholesky() {
+        Some(c) => c
+            .inverse()
+            .diagonal()
+            .iter()
+            .map(|v| {
+                if v.is_finite() && *v > 0.0 {
+                    1.0 / v
+                } else {
+                    0.0
+                }
+            })
+            .collect(),
+        None => vec![0.0; n],
     }
 }
 

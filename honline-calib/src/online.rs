@@ -17,7 +17,7 @@ use sensor_io::preprocess::PreprocessedFrame;
 use sensor_io::record::HandRecord;
 use serde::{Deserialize, Serialize};
 
-use crate::filter::{Estimator, ShapeBelief};
+use crate::filter::{marginal_certainty, Estimator, ShapeBelief};
 use crate::frame::FrameProblem;
 use crate::shape::ShapeSubset;
 use crate::terms::{IekfPrior, Layout, OnlineCtx};
@@ -98,6 +98,14 @@ pub struct OnlineFrame {
     /// The per-frame certainty: the diagonal of Σ*_n⁻¹ (scaled by
     /// [`OnlineConfig::measurement_weight`]; 0 when the frame was not solved).
     pub frame_certainty: Vec<f64>,
+    /// The cumulative marginal certainty `1 / diag(Σ̂_n)` (Fig. 4.6; per mm², 0 for inactive
+    /// entries): unlike [`OnlineFrame::certainty`] it stays low for two phalanges of a straight
+    /// finger whose sum alone is known.
+    pub marginal_certainty: Vec<f64>,
+    /// The per-frame marginal certainty `1 / diag(Σ*_n)` (Fig. 4.6; Σ*_n⁻¹ scaled as
+    /// [`OnlineFrame::frame_certainty`], with [`OnlineConfig::initial_information`] as a ridge
+    /// for what the frame does not see; 0 when the frame was not solved).
+    pub frame_marginal_certainty: Vec<f64>,
     /// Whether the frame was solved.
     pub solved: bool,
 }
@@ -314,6 +322,8 @@ impl OnlineCalibrator {
                     self.belief.information.clone(),
                 )
             });
+            self.problem
+                .refresh_collision(&self.ctx, &self.config.tracker);
             let saved = (self.ctx.beta.clone(), self.ctx.latent);
             let temporal = self.config.tracker.enabled.temporal;
             let terms = self.problem.terms(
@@ -396,12 +406,22 @@ impl OnlineCalibrator {
         }
         let frame_beta = self.ctx.beta.clone();
         let beta = self.estimate(&frame_beta);
-        let basis = &self.problem.basis;
-        let mut certainty = vec![0.0; basis.len()];
-        let mut frame_certainty = vec![0.0; basis.len()];
+        let n = self.problem.basis.len();
+        let mut certainty = vec![0.0; n];
+        let mut frame_certainty = vec![0.0; n];
+        let mut marginal = vec![0.0; n];
+        let mut frame_marginal = vec![0.0; n];
+        let cumulative = self.belief.marginal_certainty();
+        let per_frame = if solved {
+            marginal_certainty(&frame_info, self.config.initial_information)
+        } else {
+            vec![0.0; k]
+        };
         for (j, &i) in self.problem.layout.active.iter().enumerate() {
             certainty[i] = self.belief.information[(j, j)];
             frame_certainty[i] = frame_info[(j, j)];
+            marginal[i] = cumulative.get(j).copied().unwrap_or(0.0);
+            frame_marginal[i] = per_frame.get(j).copied().unwrap_or(0.0);
         }
         rec.timing_us
             .insert("filter".into(), t2.elapsed().as_secs_f64() * 1e6);
@@ -409,7 +429,7 @@ impl OnlineCalibrator {
         let posed = PosedSphereMesh::new(t, &self.pose);
         let names = t.skeleton.dofs().iter().map(|d| d.name.as_str());
         rec.set_pose(names, &self.pose.values, &posed.keypoints(t));
-        for ((name, &b), &c) in basis.names().zip(&beta).zip(&certainty) {
+        for ((name, &b), &c) in self.problem.basis.names().zip(&beta).zip(&certainty) {
             rec.shape.insert(name.to_string(), b);
             rec.shape_certainty.insert(name.to_string(), c);
         }
@@ -421,6 +441,8 @@ impl OnlineCalibrator {
             frame_beta,
             certainty,
             frame_certainty,
+            marginal_certainty: marginal,
+            frame_marginal_certainty: frame_marginal,
             solved,
         }
     }
