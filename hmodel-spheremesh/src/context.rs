@@ -464,6 +464,11 @@ impl<'m> TrackingCtx<'m> {
         &self.irls
     }
 
+    /// Replace the IRLS settings (they take effect at the next [`update`](Self::update)).
+    pub fn set_irls(&mut self, irls: IrlsParams) {
+        self.irls = irls;
+    }
+
     /// Whether the current iteration moves only the global DOFs.
     pub fn rigid_only(&self) -> bool {
         self.rigid_only

@@ -171,6 +171,11 @@ pub struct OnlineCalibrator {
     initialized: bool,
     data_ne: NormalEquations,
     next: Vec<f64>,
+    /// Median |d2m residual| (mm) of the last solved frame: the Huber threshold of
+    /// [`expected_information`](Self::expected_information)'s prediction.
+    residual_scale: f64,
+    /// Scratch for it.
+    residuals: Vec<f64>,
 }
 
 impl OnlineCalibrator {
@@ -196,6 +201,8 @@ impl OnlineCalibrator {
             pose: problem.mean_pose.clone(),
             initialized: false,
             next: ctx.beta.clone(),
+            residual_scale: 1.0,
+            residuals: Vec::new(),
             ctx,
             solver,
             ws,
@@ -285,15 +292,25 @@ impl OnlineCalibrator {
         {
             return None;
         }
+        // A model rendered from itself fits with zero residuals, where the IRLS weight g/|r| is
+        // at its cap g/ε: the information would be ~1000× what a real frame brings. The Huber
+        // threshold is raised to the typical residual of the tracked frames for the prediction.
+        let irls = self.ctx.tracking.irls().clone();
+        let mut typical = irls.clone();
+        typical.epsilon = typical.epsilon.max(self.residual_scale);
+        self.ctx.tracking.set_irls(typical);
         self.ctx.tracking.set_frame(frame);
-        self.ctx.tracking.update(pose, false).ok()?;
-        let h = self
-            .problem
-            .data_information(&self.ctx, &mut self.data_ne)?
-            * self.config.measurement_weight;
+        let h = match self.ctx.tracking.update(pose, false) {
+            Ok(()) => self
+                .problem
+                .data_information(&self.ctx, &mut self.data_ne)
+                .map(|h| h * self.config.measurement_weight),
+            Err(_) => None,
+        };
+        self.ctx.tracking.set_irls(irls);
         // Restore the tracked pose's linearization for anyone reading the context.
         let _ = self.ctx.tracking.update(&self.pose.clone(), false);
-        h.iter().all(|v| v.is_finite()).then_some(h)
+        h.filter(|h| h.iter().all(|v| v.is_finite()))
     }
 
     /// Track one frame and update the shape estimate (crate docs). Never returns a non-finite
@@ -358,6 +375,8 @@ impl OnlineCalibrator {
                     frame_info = h * self.config.measurement_weight;
                     solved = true;
                     self.pose = pose;
+                    self.residual_scale =
+                        median_abs_residual(&self.ctx.tracking, &mut self.residuals);
                 }
                 rec.timing_us
                     .insert("laplace".into(), t1.elapsed().as_secs_f64() * 1e6);
@@ -460,4 +479,16 @@ impl OnlineCalibrator {
             fallback.to_vec()
         }
     }
+}
+
+/// The median |r| over the d2m rows of `ctx`'s linearization (1 mm without rows); `r` is
+/// scratch.
+fn median_abs_residual(ctx: &TrackingCtx<'_>, r: &mut Vec<f64>) -> f64 {
+    r.clear();
+    r.extend(ctx.d2m_rows().map(|(_, _, r, _)| r.abs()));
+    if r.is_empty() {
+        return 1.0;
+    }
+    let mid = r.len() / 2;
+    *r.select_nth_unstable_by(mid, f64::total_cmp).1
 }
