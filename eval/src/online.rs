@@ -13,9 +13,13 @@ use hand_model::solver::PcaPrior;
 use hand_model::spheremesh::{default_right_hand, ShapeBasis, ShapeKind};
 use hmodel_spheremesh::{Tracker, TrackerConfig};
 use honline_calib::terms::finger_order_constraints;
-use honline_calib::{beta_error, error_subset, OnlineCalibrator, OnlineConfig};
+use honline_calib::{
+    beta_error, calibrate_offline, error_subset, subsample, OfflineConfig, OnlineCalibrator,
+    OnlineConfig, SUBSAMPLING,
+};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
+use sensor_io::preprocess::PreprocessedFrame;
 
 use crate::synthetic::{SyntheticRun, SyntheticSequence, SyntheticSpec};
 
@@ -287,6 +291,83 @@ pub fn run_online(
         truth: truth.to_vec(),
         subset: size_subset(calib.basis()),
         template: calib.basis().template_values(),
+    })
+}
+
+/// An Offline-Hard or Offline-Soft calibration (thesis §4.3.4) of a synthetic sequence.
+pub struct OfflineRun {
+    /// The calibrated β.
+    pub beta: Vec<f64>,
+    /// The subject's β.
+    pub truth: Vec<f64>,
+    /// The E_β subset (Eq. 4.16): [`size_subset`].
+    pub subset: Vec<usize>,
+    /// The frames calibrated from.
+    pub frames: Vec<usize>,
+    /// Seconds of the batch solve (tracking pass excluded).
+    pub seconds: f64,
+}
+
+impl OfflineRun {
+    /// E_β (Eq. 4.16, mm) of the calibrated β.
+    pub fn end_error(&self) -> f64 {
+        beta_error(&self.beta, &self.truth, &self.subset)
+    }
+}
+
+/// Calibrate subject `truth` moving as `motion` offline as `hands calibrate --method
+/// offline-hard|offline-soft` does: the sequence is tracked with the Ch. 3 tracker on the default
+/// template from the true first pose, the tracked frames are sub-sampled at 1/[`SUBSAMPLING`]
+/// (§4.3.4) and β is fitted jointly with their poses (`config.method` says Hard or Soft).
+pub fn run_offline(
+    spec: &SyntheticSpec,
+    truth: &[f64],
+    motion: &CalibrationMotion,
+    config: &OfflineConfig,
+) -> anyhow::Result<OfflineRun> {
+    let base = default_right_hand();
+    let prior = PcaPrior::project_default();
+    let mut tracker = Tracker::new(&base, config.frame.tracker.clone(), Some(&prior))?;
+    tracker.set_pose(&motion.pose_at(0.0))?;
+    let mut seq = calibration_sequence(spec, truth, motion)?;
+    let sk = &base.skeleton;
+    let (mut frames, mut poses, mut usable) = (Vec::new(), Vec::new(), Vec::new());
+    let every = SUBSAMPLING;
+    seq.run(
+        |f, t| {
+            let rec = tracker.track(f, t.frame, t.timestamp);
+            usable.push(rec.flags.is_empty());
+            // Only the frames that can be chosen are kept (the first usable of every `every`).
+            let k = usable.len() - 1;
+            let block = k / every * every;
+            if rec.flags.is_empty() && !usable[block..k].iter().any(|&u| u) {
+                frames.push((k, f.clone()));
+                poses.push(Pose {
+                    values: sk
+                        .dofs()
+                        .iter()
+                        .map(|d| rec.pose.get(&d.name).copied().unwrap_or(0.0))
+                        .collect(),
+                });
+            }
+            rec
+        },
+        |_| {},
+    )?;
+    let chosen = subsample(&usable, every);
+    anyhow::ensure!(
+        chosen == frames.iter().map(|(k, _)| *k).collect::<Vec<_>>(),
+        "offline frame choice disagrees with honline_calib::subsample"
+    );
+    let kept: Vec<PreprocessedFrame> = frames.into_iter().map(|(_, f)| f).collect();
+    let cal = calibrate_offline(&base, &kept, &poses, config, Some(&prior))?;
+    let basis = ShapeBasis::honline(&base)?;
+    Ok(OfflineRun {
+        beta: cal.beta,
+        truth: truth.to_vec(),
+        subset: size_subset(&basis),
+        frames: chosen,
+        seconds: cal.seconds,
     })
 }
 
