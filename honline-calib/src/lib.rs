@@ -20,6 +20,8 @@
 //!   information form on the per-frame modes (Eq. 4.8–4.10, Table 1, [`ShapeBelief::fuse`]) —
 //!   and joint cumulative, the default — E_iekf (Eq. 4.11) inside the LM, an IEKF (Table 2,
 //!   §4.6.3, [`ShapeBelief::absorb`]).
+//! - Where the shape is still uncertain, per model element ([`element_uncertainty`]), for a
+//!   hand rendering colored by certainty.
 //! - Calibration guidance (thesis §5.2, [`guide`]): the least-certain shape parameters and the
 //!   candidate pose whose expected information gain for them is largest.
 //! - Output per frame ([`OnlineFrame`]): β̂_n and the per-frame mode β*_n with their certainties
@@ -75,6 +77,7 @@
 //! assert!(out.beta.iter().all(|b| b.is_finite()));
 //! ```
 
+mod display;
 mod filter;
 mod frame;
 mod guide;
@@ -83,6 +86,7 @@ mod online;
 mod shape;
 pub mod terms;
 
+pub use display::element_uncertainty;
 pub use filter::{marginal_certainty, marginal_information, Estimator, ShapeBelief};
 pub use guide::{guide, Guidance};
 pub use offline::{

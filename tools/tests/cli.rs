@@ -490,6 +490,40 @@ fn track_rejects_bad_arguments_clearly() {
     assert!(!out.exists(), "no output on failure");
 }
 
+/// Issue 8 item 4: `hands report ch4` writes the estimators' table, Fig. 4.6 and the hand
+/// colored by certainty.
+#[test]
+fn report_ch4_runs_on_a_few_frames() {
+    let d = tmp("report-ch4");
+    let (ok, text) = hands(&[
+        "report",
+        "ch4",
+        "--frames",
+        "45",
+        "--out",
+        d.to_str().expect("utf8"),
+    ]);
+    assert!(ok, "{text}");
+    let md = std::fs::read_to_string(d.join("README.md")).expect("README.md");
+    for needle in [
+        "| online iekf |",
+        "| Offline-Soft",
+        "Fig. 4.6",
+        "within two reported",
+    ] {
+        assert!(md.contains(needle), "{needle} missing:\n{md}");
+    }
+    for f in [
+        "fig-4-6-estimate.svg",
+        "fig-4-6-certainty.svg",
+        "fig-4-6-poses.png",
+        "certainty-hands.png",
+    ] {
+        assert!(d.join(f).exists(), "{f} missing");
+    }
+    assert!(!md.contains("NaN"), "{md}");
+}
+
 #[test]
 fn report_ch2_runs_on_a_few_frames() {
     let d = tmp("report");

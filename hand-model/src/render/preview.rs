@@ -210,6 +210,28 @@ pub fn render_preview(
     pose: &Pose,
     options: &PreviewOptions,
 ) -> Result<Preview> {
+    let colors: Vec<[u8; 3]> = template
+        .elements
+        .iter()
+        .map(|e| {
+            template
+                .skeleton
+                .bones()
+                .get(e.bone)
+                .map_or([180, 180, 180], |b| bone_color(&b.name))
+        })
+        .collect();
+    render_preview_colored(template, pose, options, &colors)
+}
+
+/// [`render_preview`] with one color per element of `template` (e.g. a quantity mapped to a
+/// color scale; grey where `colors` is short).
+pub fn render_preview_colored(
+    template: &SphereMeshTemplate,
+    pose: &Pose,
+    options: &PreviewOptions,
+    colors: &[[u8; 3]],
+) -> Result<Preview> {
     if pose.values.len() != template.skeleton.num_dofs()
         || pose.values.iter().any(|v| !v.is_finite())
     {
@@ -222,20 +244,9 @@ pub fn render_preview(
     let framing = frame_model(&posed.spheres, options.width, options.height, options.side)?;
     let spheres = framing.spheres_in_camera(&posed.spheres);
     let elements: Vec<Element> = template.elements.iter().map(|e| e.element).collect();
-    let colors: Vec<[u8; 3]> = template
-        .elements
-        .iter()
-        .map(|e| {
-            template
-                .skeleton
-                .bones()
-                .get(e.bone)
-                .map_or([180, 180, 180], |b| bone_color(&b.name))
-        })
-        .collect();
     let mut render = DepthRender::default();
     DepthRenderer::new().render(&framing.intrinsics, &spheres, &elements, &mut render)?;
-    let image = shade(&render, &framing.intrinsics, &colors, options.background);
+    let image = shade(&render, &framing.intrinsics, colors, options.background);
     Ok(Preview {
         image,
         render,

@@ -7,6 +7,7 @@
 
 mod ch2;
 mod ch3;
+mod ch4;
 
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
@@ -25,12 +26,12 @@ use crate::trackers::{e_m2d, FrameTracker};
 /// Example: `hands report ch3 --out docs/ch3 --frames 300`
 #[derive(Args)]
 pub struct ReportArgs {
-    /// Which report: `ch2` or `ch3`.
+    /// Which report: `ch2`, `ch3` or `ch4`.
     pub which: String,
     /// Output folder (README.md and SVG plots); default `docs/<which>`.
     #[arg(long)]
     pub out: Option<PathBuf>,
-    /// Frames per sequence (at 60 Hz).
+    /// Frames per sequence (at 60 Hz; `ch4` at 30 Hz).
     #[arg(long, default_value_t = 300)]
     pub frames: usize,
     /// Seed of motions, subject and noise.
@@ -52,7 +53,8 @@ pub fn run(args: ReportArgs) -> Result<()> {
     let write = match args.which.as_str() {
         "ch2" => ch2::write,
         "ch3" => ch3::write,
-        other => anyhow::bail!("unknown report `{other}` (available: ch2, ch3)"),
+        "ch4" => ch4::write,
+        other => anyhow::bail!("unknown report `{other}` (available: ch2, ch3, ch4)"),
     };
     std::fs::create_dir_all(&out).with_context(|| format!("creating {}", out.display()))?;
     let started = std::time::Instant::now();
