@@ -19,7 +19,7 @@ use hand_model::render::preview::{write_preview_png, PreviewOptions};
 use hand_model::solver::PcaPrior;
 use hand_model::spheremesh::{PosedSphereMesh, ShapeBasis, SphereMeshTemplate};
 use hmodel_spheremesh::calibration::{
-    calibrate, initialize_clouds, principal_frame, select_frames, split_forearm, Calibration,
+    calibrate, calibrate_clouds, principal_frame, select_frames, split_forearm, Calibration,
     CalibrationConfig, CalibrationFrame, CloudSearch, IterationRecord,
 };
 use hmodel_spheremesh::{Tracker, TrackerConfig};
@@ -69,7 +69,8 @@ impl CalibrationMethod {
 /// frames' poses by `--method`. A folder of `.obj` scans (complete point clouds of one hand in
 /// several poses, any unit) is calibrated from every scan: the unit is estimated (or given by
 /// `--units-per-mm`), the forearm cut off, the handedness and each scan's pose found by a
-/// hypothesis search (`hmodel_spheremesh::calibration::initialize_clouds`).
+/// hypothesis search with a per-digit refinement, alternated with the calibration
+/// (`hmodel_spheremesh::calibration::calibrate_clouds`).
 ///
 /// Examples: `hands calibrate seq.mcap --auto 8 --out me.json --report calib/`,
 /// `hands calibrate scans/ --out me.json`
@@ -440,7 +441,9 @@ fn run_scans(args: &CalibrateArgs, base: &SphereMeshTemplate, files: &[PathBuf])
         .iter()
         .map(|s| s.iter().map(|p| p / units).collect())
         .collect();
-    let init = initialize_clouds(base, &mm, &CloudSearch::default())?;
+    let config: CalibrationConfig = read_config(args.config.as_deref())?;
+    let run = calibrate_clouds(base, &mm, &CloudSearch::default(), &config)?;
+    let init = &run.init;
     eprintln!(
         "{} hand (hypothesis energy {:.0} vs {:.0} mirrored); forearm removed: {:?} points",
         if init.mirrored {
@@ -456,9 +459,15 @@ fn run_scans(args: &CalibrateArgs, base: &SphereMeshTemplate, files: &[PathBuf])
             .map(|(s, f)| s.len() - f.points.len())
             .collect::<Vec<_>>()
     );
+    eprintln!(
+        "calibration rounds (data energy, kept): {:?}",
+        run.rounds
+            .iter()
+            .map(|(e, k)| (e.round(), *k))
+            .collect::<Vec<_>>()
+    );
     let poses: Vec<Pose> = init.poses.iter().map(|p| p.pose.clone()).collect();
-    let config: CalibrationConfig = read_config(args.config.as_deref())?;
-    let cal = Outcome::from(calibrate(&init.template, &init.frames, &poses, &config)?);
+    let cal = Outcome::from(run.calibration);
     let before = scan_d2m(&init.template, &poses, &init.frames)?;
     let after = scan_d2m(&cal.template, &cal.poses, &init.frames)?;
     for ((f, b), a) in files.iter().zip(&before).zip(&after) {

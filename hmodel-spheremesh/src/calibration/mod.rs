@@ -14,13 +14,14 @@ mod solve;
 
 pub use block::{BlockArrow, Unknown};
 pub use cloud::{
-    initialize_cloud_pose, initialize_clouds, place_pose, principal_frame, split_forearm,
-    CloudInit, CloudPose, CloudSearch, ForearmSplit,
+    calibrate_clouds, initialize_cloud_pose, initialize_clouds, place_pose, principal_frame,
+    refine_digits, split_forearm, CloudCalibration, CloudInit, CloudPose, CloudSearch,
+    ForearmSplit,
 };
 pub use rows::{DataEnergy, DataWeights, RowLayout, ShapeRows};
 pub use select::select_frames;
 
-pub use shape::{rest_sphere_errors, ShapeSpace, ShapeState};
+pub use shape::{fit_rest_spheres, rest_sphere_errors, ShapeSpace, ShapeState, SphereTarget};
 pub use solve::{
     calibrate, Calibration, CalibrationConfig, CalibrationError, CalibrationFrame, FrameKind,
     IterationRecord, LinearSolver, Schedule, Stage,

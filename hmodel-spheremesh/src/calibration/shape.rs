@@ -24,7 +24,7 @@ use hand_model::kinematics::Skeleton;
 use hand_model::math::{exp_so3, Rigid3};
 use hand_model::spheremesh::{Attachment, PosedSphereMesh, ShapeBasis, SphereMeshTemplate};
 use hand_model::ModelError;
-use nalgebra::{Matrix3, Vector3};
+use nalgebra::{DMatrix, DVector, Matrix3, Vector3};
 
 /// The shape unknowns of a template and where they live in the shape vector.
 #[derive(Clone, Debug)]
@@ -302,6 +302,136 @@ pub fn rest_sphere_errors(a: &SphereMeshTemplate, b: &SphereMeshTemplate) -> Opt
         .sum::<f64>()
         / n;
     Some((centers, radii))
+}
+
+/// A rest sphere of a reference model that [`fit_rest_spheres`] matches: the template's sphere
+/// `sphere` should have this rest center (the template's model frame, mm) and radius (mm).
+#[derive(Copy, Clone, Debug, PartialEq)]
+pub struct SphereTarget {
+    /// Index of the template sphere.
+    pub sphere: usize,
+    /// Its target rest center.
+    pub center: Vector3<f64>,
+    /// Its target radius.
+    pub radius: f64,
+}
+
+/// The template of `base`'s topology and shape space (β, rest rotations, free sphere offsets and
+/// radii) whose rest spheres come nearest to `targets`: a reference model that stores spheres
+/// but not this crate's kinematics (the original authors' fitted sphere-mesh, say) carried
+/// onto this skeleton, so that it can be posed by the same pose search as a calibration and
+/// their residuals compared on equal terms. β moves the joints with the spheres, as anatomy
+/// does; free offsets take up what β cannot.
+///
+/// Minimizes `Σ |c_s − c*_s|² + (r_s − r*_s)²` over the targets plus priors toward `base` on the
+/// rest rotations (10 per rad²) and the free offsets (10⁻² per mm², which only holds the spheres
+/// without a target), `iterations` Levenberg–Marquardt steps. Returns the template with the
+/// mean center distance and mean absolute radius difference (mm) left at the targets. Errors:
+/// no target, a target index out of range or not finite, a `base` without the honline β basis.
+pub fn fit_rest_spheres(
+    base: &SphereMeshTemplate,
+    targets: &[SphereTarget],
+    iterations: usize,
+) -> Result<(SphereMeshTemplate, f64, f64), ModelError> {
+    let bad = targets.iter().find(|t| {
+        t.sphere >= base.spheres.len()
+            || !t.center.iter().all(|v| v.is_finite())
+            || !t.radius.is_finite()
+    });
+    if targets.is_empty() || bad.is_some() {
+        return Err(ModelError::InvalidArgument {
+            name: "targets",
+            reason: format!(
+                "{} targets for {} spheres; each needs a sphere index in range and finite values",
+                targets.len(),
+                base.spheres.len()
+            ),
+        });
+    }
+    let space = ShapeSpace::new(base, true)?;
+    let n = space.len();
+    let first_free = space.num_beta() + space.rotation_offsets().count() * 3;
+    let zeros = hand_model::kinematics::Pose::zeros(&base.skeleton);
+    // Cost, gradient (Jᵀr) and Gauss–Newton matrix (JᵀJ) at a state.
+    let linearize = |state: &ShapeState| -> Result<(f64, DVector<f64>, DMatrix<f64>), ModelError> {
+        let t = space.template(base, state)?;
+        let posed = PosedSphereMesh::new(&t, &zeros);
+        let mut g = DVector::zeros(n);
+        let mut h = DMatrix::zeros(n, n);
+        let mut cost = 0.0;
+        let mut add = |cols: &[(usize, f64)], r: f64, w: f64| {
+            cost += w * r * r;
+            for &(i, a) in cols {
+                g[i] += w * a * r;
+                for &(j, b) in cols {
+                    h[(i, j)] += w * a * b;
+                }
+            }
+        };
+        for target in targets {
+            let sphere = &posed.spheres[target.sphere];
+            let mut cols: Vec<(usize, Vector3<f64>, f64)> = Vec::new();
+            space.for_each_sphere_column(&t, &posed, target.sphere, 1.0, &mut |i, dc, dr| {
+                cols.push((i, dc, dr))
+            });
+            let res = sphere.center - target.center;
+            for axis in 0..3 {
+                let row: Vec<(usize, f64)> = cols.iter().map(|c| (c.0, c.1[axis])).collect();
+                add(&row, res[axis], 1.0);
+            }
+            let row: Vec<(usize, f64)> = cols.iter().map(|c| (c.0, c.2)).collect();
+            add(&row, sphere.radius - target.radius, 1.0);
+        }
+        for (k, o) in space.rotation_slots() {
+            let w = nalgebra::Rotation3::from_matrix(&state.rotation[k]).scaled_axis();
+            for j in 0..3 {
+                add(&[(o + j, 1.0)], w[j], 10.0);
+            }
+        }
+        for (i, &x) in state.free.iter().enumerate() {
+            add(&[(first_free + i, 1.0)], x, 1e-2);
+        }
+        Ok((cost, g, h))
+    };
+    let mut state = space.identity(base);
+    let (mut cost, mut g, mut h) = linearize(&state)?;
+    let mut lambda = 1e-4;
+    for _ in 0..iterations {
+        let mut a = h.clone();
+        for i in 0..n {
+            a[(i, i)] += lambda * a[(i, i)] + 1e-9;
+        }
+        let Some(delta) = a.cholesky().map(|c| c.solve(&(-&g))) else {
+            lambda *= 10.0;
+            continue;
+        };
+        let next = space.step(&state, delta.as_slice());
+        match linearize(&next) {
+            Ok((c, ng, nh)) if c < cost => {
+                let done = cost - c < 1e-10 * cost.max(1e-300);
+                (state, cost, g, h) = (next, c, ng, nh);
+                lambda = (lambda / 3.0).max(1e-12);
+                if done {
+                    break;
+                }
+            }
+            _ => lambda *= 10.0,
+        }
+    }
+    let t = space.template(base, &state)?;
+    let posed = PosedSphereMesh::new(&t, &zeros);
+    let k = targets.len() as f64;
+    let centers = targets
+        .iter()
+        .map(|x| (posed.spheres[x.sphere].center - x.center).norm())
+        .sum::<f64>()
+        / k;
+    let radii = targets
+        .iter()
+        .map(|x| (posed.spheres[x.sphere].radius - x.radius).abs())
+        .sum::<f64>()
+        / k;
+    Ok((t, centers, radii))
 }
 
 /// The frame of bone `k` before its own DOFs act (`G_parent ∘ T̄_k`).
