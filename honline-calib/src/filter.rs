@@ -1,7 +1,7 @@
 //! The Laplace approximation of the per-frame posterior (Eq. 4.5–4.6, §4.6.1) and the
 //! cumulative estimates in information form (Eq. 4.8–4.10, Table 1; Table 2).
 
-use nalgebra::{DMatrix, DVector};
+use nalgebra::{Cholesky, DMatrix, DVector, Dyn};
 use serde::{Deserialize, Serialize};
 
 /// How per-frame shape information is accumulated (thesis §4.3.1–4.3.3).
@@ -55,30 +55,107 @@ pub fn marginal_information(
     theta: &[usize],
     beta: &[usize],
 ) -> Option<DMatrix<f64>> {
+    let mut out = DMatrix::zeros(0, 0);
+    marginal_information_into(h, theta, beta, &mut InfoScratch::default(), &mut out).then_some(out)
+}
+
+/// Buffers of [`marginal_information_into`] and [`marginal_certainty_into`], so that the
+/// per-frame information algebra of the online calibrator allocates nothing once they have
+/// held the frame's sizes.
+#[derive(Clone, Debug)]
+pub(crate) struct InfoScratch {
+    htt: DMatrix<f64>,
+    htb: DMatrix<f64>,
+    htb_t: DMatrix<f64>,
+    product: DMatrix<f64>,
+}
+
+impl Default for InfoScratch {
+    fn default() -> Self {
+        let empty = || DMatrix::zeros(0, 0);
+        Self {
+            htt: empty(),
+            htb: empty(),
+            htb_t: empty(),
+            product: empty(),
+        }
+    }
+}
+
+/// `m` as a `rows × cols` matrix (reallocated only when its shape differs; contents
+/// unspecified).
+fn shaped(m: &mut DMatrix<f64>, rows: usize, cols: usize) -> &mut DMatrix<f64> {
+    if m.shape() != (rows, cols) {
+        *m = DMatrix::zeros(rows, cols);
+    }
+    m
+}
+
+/// Factor `m` in place (its storage becomes the factor's, given back by `Cholesky::unpack`
+/// style calls); `None`, and `m` emptied, when it is not positive definite.
+fn cholesky_in(m: &mut DMatrix<f64>) -> Option<Cholesky<f64, Dyn>> {
+    Cholesky::new(std::mem::replace(m, DMatrix::zeros(0, 0)))
+}
+
+/// [`marginal_information`] into `out` with the buffers of `scratch` (the same arithmetic, in
+/// the same order, so the same bits); false (`out` unspecified) where it returns `None`.
+pub(crate) fn marginal_information_into(
+    h: &DMatrix<f64>,
+    theta: &[usize],
+    beta: &[usize],
+    scratch: &mut InfoScratch,
+    out: &mut DMatrix<f64>,
+) -> bool {
     if !h.iter().all(|v| v.is_finite()) {
-        return None;
+        return false;
     }
     let (nt, nb) = (theta.len(), beta.len());
-    let htt = DMatrix::from_fn(nt, nt, |i, j| h[(theta[i], theta[j])]);
-    let htb = DMatrix::from_fn(nt, nb, |i, j| h[(theta[i], beta[j])]);
-    let hbb = DMatrix::from_fn(nb, nb, |i, j| h[(beta[i], beta[j])]);
+    let reg = shaped(&mut scratch.htt, nt, nt);
+    for (j, &tj) in theta.iter().enumerate() {
+        for (i, &ti) in theta.iter().enumerate() {
+            reg[(i, j)] = h[(ti, tj)];
+        }
+    }
+    let htb = shaped(&mut scratch.htb, nt, nb);
+    for (j, &bj) in beta.iter().enumerate() {
+        for (i, &ti) in theta.iter().enumerate() {
+            htb[(i, j)] = h[(ti, bj)];
+        }
+    }
     let scale = (0..nt)
-        .map(|i| htt[(i, i)].abs())
+        .map(|i| reg[(i, i)].abs())
         .fold(0.0, f64::max)
         .max(1.0);
-    let mut reg = htt;
     for i in 0..nt {
         reg[(i, i)] += 1e-9 * scale;
     }
-    let chol = reg.cholesky()?;
-    let x = chol.solve(&htb);
-    let mut s = hbb - htb.transpose() * x;
-    let s2 = (&s + s.transpose()) * 0.5;
-    s = s2;
-    for i in 0..nb {
-        s[(i, i)] = s[(i, i)].max(0.0);
+    let Some(chol) = cholesky_in(&mut scratch.htt) else {
+        return false;
+    };
+    // x = H_θθ⁻¹ H_θβ, held in `product` until the product below.
+    let x = shaped(&mut scratch.product, nt, nb);
+    x.copy_from(&scratch.htb);
+    chol.solve_mut(x);
+    scratch.htt = chol.unpack_dirty();
+    let htb_t = shaped(&mut scratch.htb_t, nb, nt);
+    scratch.htb.transpose_to(htb_t);
+    // S = H_ββ − H_βθ x, then (S + Sᵀ)/2 with a non-negative diagonal.
+    let s = shaped(out, nb, nb);
+    htb_t.mul_to(&scratch.product, s);
+    for (j, &bj) in beta.iter().enumerate() {
+        for (i, &bi) in beta.iter().enumerate() {
+            s[(i, j)] = h[(bi, bj)] - s[(i, j)];
+        }
     }
-    Some(s)
+    for j in 0..nb {
+        for i in 0..j {
+            let (a, b) = (s[(i, j)], s[(j, i)]);
+            s[(i, j)] = (a + b) * 0.5;
+            s[(j, i)] = (b + a) * 0.5;
+        }
+        s[(j, j)] = ((s[(j, j)] + s[(j, j)]) * 0.5).max(0.0);
+    }
+    true
 }
 
 /// A Gaussian over the active β in information form: mean `x̂` and information `Ĥ = Σ̂⁻¹`.
@@ -149,26 +226,44 @@ impl ShapeBelief {
 /// frame says nothing of a hidden finger. Zeros when the matrix is not positive definite or not
 /// finite.
 pub fn marginal_certainty(information: &DMatrix<f64>, ridge: f64) -> Vec<f64> {
+    let mut out = Vec::new();
+    marginal_certainty_into(information, ridge, &mut InfoScratch::default(), &mut out);
+    out
+}
+
+/// [`marginal_certainty`] into `out` with the buffers of `scratch` (the same arithmetic, so
+/// the same bits).
+pub(crate) fn marginal_certainty_into(
+    information: &DMatrix<f64>,
+    ridge: f64,
+    scratch: &mut InfoScratch,
+    out: &mut Vec<f64>,
+) {
     let n = information.nrows();
-    let mut h = information.clone();
-    for i in 0..n.min(h.ncols()) {
+    out.clear();
+    // A non-square matrix is refused by the factorization below as by nalgebra's.
+    assert!(information.is_square(), "information must be square");
+    let h = shaped(&mut scratch.htt, n, n);
+    h.copy_from(information);
+    for i in 0..n {
         h[(i, i)] += ridge;
     }
-    match h.cholesky() {
-        Some(c) => c
-            .inverse()
-            .diagonal()
-            .iter()
-            .map(|v| {
-                if v.is_finite() && *v > 0.0 {
-                    1.0 / v
-                } else {
-                    0.0
-                }
-            })
-            .collect(),
-        None => vec![0.0; n],
-    }
+    let Some(c) = cholesky_in(&mut scratch.htt) else {
+        out.resize(n, 0.0);
+        return;
+    };
+    // The inverse as nalgebra's `Cholesky::inverse` forms it: the identity solved in place.
+    let inv = shaped(&mut scratch.product, n, n);
+    inv.fill_with_identity();
+    c.solve_mut(inv);
+    scratch.htt = c.unpack_dirty();
+    out.extend(inv.diagonal().iter().map(|v| {
+        if v.is_finite() && *v > 0.0 {
+            1.0 / v
+        } else {
+            0.0
+        }
+    }));
 }
 
 #[cfg(test)]
@@ -193,6 +288,57 @@ mod tests {
         let p = (DMatrix::identity(2, 2) - &k) * &p0;
         assert!((b.mean - x).norm() < 1e-12);
         assert!((b.information.try_inverse().unwrap() - p).norm() < 1e-12);
+    }
+
+    /// The buffered forms give the bits of the textbook expressions they replaced (the online
+    /// calibrator's results must not move), reusing their buffers across sizes.
+    #[test]
+    fn buffered_forms_match_the_textbook_expressions_bit_for_bit() {
+        let mut scratch = InfoScratch::default();
+        let (mut out, mut diag) = (DMatrix::zeros(0, 0), Vec::new());
+        for n in [5usize, 12, 40, 12] {
+            let a = DMatrix::from_fn(n, n, |i, j| (((i * 7 + j * 3) % 11) as f64 - 5.0) * 0.37);
+            let h = &a * a.transpose() + DMatrix::identity(n, n) * 0.1;
+            let theta: Vec<usize> = (0..n).filter(|i| i % 3 != 1).collect();
+            let beta: Vec<usize> = (0..n).filter(|i| i % 3 == 1).collect();
+            // Schur complement, as written before the buffers.
+            let htt = DMatrix::from_fn(theta.len(), theta.len(), |i, j| h[(theta[i], theta[j])]);
+            let htb = DMatrix::from_fn(theta.len(), beta.len(), |i, j| h[(theta[i], beta[j])]);
+            let hbb = DMatrix::from_fn(beta.len(), beta.len(), |i, j| h[(beta[i], beta[j])]);
+            let scale = (0..theta.len())
+                .map(|i| htt[(i, i)].abs())
+                .fold(1.0, f64::max);
+            let reg = htt + DMatrix::identity(theta.len(), theta.len()) * (1e-9 * scale);
+            let s = hbb - htb.transpose() * reg.cholesky().unwrap().solve(&htb);
+            let mut expected = (&s + s.transpose()) * 0.5;
+            expected.diagonal().iter().for_each(|d| assert!(*d >= 0.0));
+            assert!(marginal_information_into(
+                &h,
+                &theta,
+                &beta,
+                &mut scratch,
+                &mut out
+            ));
+            assert_eq!(out, expected, "n = {n}");
+            expected = h.clone() + DMatrix::identity(n, n) * 0.25;
+            let inverse = expected.cholesky().unwrap().inverse();
+            let certainty: Vec<f64> = inverse.diagonal().iter().map(|v| 1.0 / v).collect();
+            marginal_certainty_into(&h, 0.25, &mut scratch, &mut diag);
+            assert_eq!(diag, certainty, "n = {n}");
+        }
+        // Not positive definite: zeros, and the buffers recover.
+        let bad = -DMatrix::<f64>::identity(4, 4);
+        marginal_certainty_into(&bad, 0.0, &mut scratch, &mut diag);
+        assert_eq!(diag, [0.0; 4]);
+        assert!(!marginal_information_into(
+            &bad,
+            &[0, 1],
+            &[2, 3],
+            &mut scratch,
+            &mut out
+        ));
+        let two = marginal_certainty(&DMatrix::identity(3, 3), 1.0);
+        assert!(two.iter().all(|c| (c - 2.0).abs() < 1e-12), "{two:?}");
     }
 
     /// The Schur complement is the inverse of the β block of the covariance.

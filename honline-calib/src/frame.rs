@@ -12,7 +12,7 @@ use hmodel_spheremesh::terms::Collision;
 use hmodel_spheremesh::{EnabledTerms, TrackerConfig, TrackingCtx};
 use nalgebra::DMatrix;
 
-use crate::filter::marginal_information;
+use crate::filter::{marginal_information_into, InfoScratch};
 use crate::online::{OnlineConfig, OnlineError};
 use crate::terms::{
     finger_order_constraints, Layout, Lifted, OnlineCtx, ShapeData, ShapePrior, ShapePriorParams,
@@ -64,6 +64,9 @@ pub(crate) struct FrameProblem {
     /// The PCA mean pose (the rest pose without a prior).
     pub(crate) mean_pose: Pose,
     enabled: EnabledTerms,
+    /// The system indices of the pose DOFs and of the active β (the blocks of Eq. 4.5).
+    theta_index: Vec<usize>,
+    beta_index: Vec<usize>,
 }
 
 impl FrameProblem {
@@ -114,6 +117,10 @@ impl FrameProblem {
             pose_prior,
             mean_pose,
             enabled: tc.enabled.clone(),
+            theta_index: (0..layout.num_dofs).collect(),
+            beta_index: (0..layout.active.len())
+                .map(|j| layout.beta_index(j))
+                .collect(),
             base: base.clone(),
             basis,
             layout,
@@ -196,6 +203,14 @@ impl FrameProblem {
         pose: &Pose,
         rigid_only: bool,
     ) -> Result<(), TermError> {
+        self.reshape(ctx)?;
+        ctx.tracking.update(pose, rigid_only)
+    }
+
+    /// The first half of [`FrameProblem::prepare`]: reshape `ctx`'s template when its β
+    /// changed (separate so that the online calibrator can time it apart from the
+    /// correspondence search, which is what the plain tracker's stages compare with).
+    pub(crate) fn reshape(&self, ctx: &mut OnlineCtx) -> Result<(), TermError> {
         if ctx.dirty {
             let t = self
                 .basis
@@ -206,7 +221,7 @@ impl FrameProblem {
                 .map_err(|_| TermError::Failed("template topology changed"))?;
             ctx.dirty = false;
         }
-        ctx.tracking.update(pose, rigid_only)
+        Ok(())
     }
 
     /// Clamp the active entries of `beta` to their bounds; whether the result is a valid model
@@ -251,21 +266,53 @@ impl FrameProblem {
 
     /// The Laplace information of Eq. 4.5 restricted to β: the data terms' Gauss–Newton
     /// Hessian at `ctx`'s linearization, marginalized over the pose
-    /// ([`marginal_information`]); `ne` is scratch of the layout's size. `None` when the data
+    /// ([`crate::marginal_information`]); `ne` is scratch of the layout's size. `None` when the data
     /// term fails or the Hessian is not finite.
     pub(crate) fn data_information(
         &self,
         ctx: &OnlineCtx,
         ne: &mut NormalEquations,
     ) -> Option<DMatrix<f64>> {
+        let mut out = DMatrix::zeros(0, 0);
+        self.data_information_into(ctx, ne, &mut InfoScratch::default(), &mut out)
+            .then_some(out)
+    }
+
+    /// [`FrameProblem::data_information`] into `out` with the buffers of `scratch`; false
+    /// (`out` unspecified) where that returns `None`.
+    pub(crate) fn data_information_into(
+        &self,
+        ctx: &OnlineCtx,
+        ne: &mut NormalEquations,
+        scratch: &mut InfoScratch,
+        out: &mut DMatrix<f64>,
+    ) -> bool {
         ne.clear();
-        self.data.accumulate(ctx, ne).ok()?;
+        self.data.accumulate(ctx, ne).is_ok() && self.marginal(ne, scratch, out)
+    }
+
+    /// [`FrameProblem::data_information_into`] from the data system that the LM evaluation
+    /// armed by [`ShapeData::capture_next`] copied (the same numbers without assembling the
+    /// rows again); false when there is no copy or the Hessian is not finite.
+    pub(crate) fn captured_information(
+        &self,
+        scratch: &mut InfoScratch,
+        out: &mut DMatrix<f64>,
+    ) -> bool {
+        self.data
+            .captured()
+            .is_some_and(|mut ne| self.marginal(&mut ne, scratch, out))
+    }
+
+    /// The pose-marginalized β block of the data system `ne` (upper triangle accumulated).
+    fn marginal(
+        &self,
+        ne: &mut NormalEquations,
+        scratch: &mut InfoScratch,
+        out: &mut DMatrix<f64>,
+    ) -> bool {
         ne.symmetrize();
-        let theta: Vec<usize> = (0..self.layout.num_dofs).collect();
-        let beta: Vec<usize> = (0..self.layout.active.len())
-            .map(|j| self.layout.beta_index(j))
-            .collect();
-        marginal_information(ne.lhs(), &theta, &beta)
+        marginal_information_into(ne.lhs(), &self.theta_index, &self.beta_index, scratch, out)
     }
 }
 
@@ -279,4 +326,64 @@ pub(crate) fn step_latent(latent: [f64; 3], delta: &[f64]) -> Option<[f64; 3]> {
     next.iter()
         .all(|v| v.is_finite())
         .then(|| next.map(|v| v.clamp(0.5, 2.0)))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use hand_model::spheremesh::default_right_hand;
+    use hmodel_spheremesh::synthetic::rendered_frame;
+    use sensor_io::Camera;
+
+    /// The Laplace information read from the data term's copy of an evaluation equals a fresh
+    /// assembly at the same context bit for bit (the online calibrator's results must not
+    /// depend on which one it uses), and only an armed evaluation on a cleared system is kept.
+    #[test]
+    fn captured_information_equals_a_fresh_assembly() {
+        let base = default_right_hand();
+        let config = OnlineConfig::default();
+        let problem = FrameProblem::new(&base, &config, None).unwrap();
+        let mut ctx = problem.context(&config.tracker).unwrap();
+        let pose = Pose::from_named(
+            &base.skeleton,
+            [
+                ("global_tz", 400.0),
+                ("global_ry", 0.3),
+                ("index_mcp_flex", 0.5),
+                ("middle_pip_flex", 0.7),
+            ],
+        )
+        .unwrap();
+        let frame = rendered_frame(&base, &pose, &Camera::sr300_qvga(), 1000).unwrap();
+        ctx.tracking.set_frame(&frame);
+        let mut moved = pose.clone();
+        moved.values[0] += 2.0;
+        problem.prepare(&mut ctx, &moved, false).unwrap();
+        let n = problem.layout.dim();
+        let (mut scratch, mut fresh, mut kept) = (
+            InfoScratch::default(),
+            DMatrix::zeros(0, 0),
+            DMatrix::zeros(0, 0),
+        );
+        let mut ne = NormalEquations::new(n);
+        assert!(problem.data_information_into(&ctx, &mut ne, &mut scratch, &mut fresh));
+        // Not armed, or armed on a system other terms already hold: no copy.
+        ne.clear();
+        problem.data.accumulate(&ctx, &mut ne).unwrap();
+        assert!(!problem.captured_information(&mut scratch, &mut kept));
+        problem.data.capture_next(true);
+        ne.clear();
+        ne.add_diagonal(0, 1.0).unwrap();
+        problem.data.accumulate(&ctx, &mut ne).unwrap();
+        assert!(!problem.captured_information(&mut scratch, &mut kept));
+        // Armed, first on a cleared system (as the LM runs it): the same bits.
+        problem.data.capture_next(true);
+        ne.clear();
+        problem.data.accumulate(&ctx, &mut ne).unwrap();
+        assert!(problem.captured_information(&mut scratch, &mut kept));
+        assert!(fresh.iter().any(|v| *v != 0.0));
+        assert_eq!(kept, fresh);
+        problem.data.capture_next(false);
+        assert!(!problem.captured_information(&mut scratch, &mut kept));
+    }
 }

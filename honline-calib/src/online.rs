@@ -17,7 +17,7 @@ use sensor_io::preprocess::PreprocessedFrame;
 use sensor_io::record::HandRecord;
 use serde::{Deserialize, Serialize};
 
-use crate::filter::{marginal_certainty, Estimator, ShapeBelief};
+use crate::filter::{marginal_certainty_into, Estimator, InfoScratch, ShapeBelief};
 use crate::frame::FrameProblem;
 use crate::shape::ShapeSubset;
 use crate::terms::{IekfPrior, Layout, OnlineCtx};
@@ -110,11 +110,17 @@ pub struct OnlineFrame {
     pub solved: bool,
 }
 
-/// Reshapes the context's template when β changed and accepts only valid β steps.
+/// Reshapes the context's template when β changed and accepts only valid β steps; times the
+/// reshaping and the correspondence search apart (the record's `reshape` and
+/// `correspondences` stages).
 struct ShapeCallback<'a> {
     problem: &'a FrameProblem,
+    /// The solver's iteration count ([`hand_model::solver::LmOptions::iterations`]).
+    iterations: usize,
     next: Vec<f64>,
     rejected: usize,
+    reshape_us: f64,
+    correspondences_us: f64,
 }
 
 impl LmCallback<OnlineCtx> for ShapeCallback<'_> {
@@ -124,7 +130,21 @@ impl LmCallback<OnlineCtx> for ShapeCallback<'_> {
         ctx: &mut OnlineCtx,
         info: IterInfo,
     ) -> Result<(), TermError> {
-        self.problem.prepare(ctx, pose, info.rigid_only)
+        // The last linearization of the solve is the Laplace one (Eq. 4.5): the evaluation after
+        // the last update, or without one (the tracker's default) the last iteration's — the
+        // update after it moves β but not the context. The data term keeps its system there;
+        // a solve that stops early leaves no copy and the Laplace step assembles its own.
+        let last = info.iteration + 1 == self.iterations;
+        self.problem
+            .data
+            .capture_next(info.final_evaluation || last);
+        let t = Instant::now();
+        self.problem.reshape(ctx)?;
+        let t1 = Instant::now();
+        self.reshape_us += (t1 - t).as_secs_f64() * 1e6;
+        let r = ctx.tracking.update(pose, info.rigid_only);
+        self.correspondences_us += t1.elapsed().as_secs_f64() * 1e6;
+        r
     }
 
     /// β ← β + δβ clamped to the β bounds, β̃ ← β̃ + δβ̃; a step whose shape the basis refuses
@@ -176,6 +196,14 @@ pub struct OnlineCalibrator {
     residual_scale: f64,
     /// Scratch for it.
     residuals: Vec<f64>,
+    /// Per-frame buffers of the Laplace information and the filter (k × k, k active β), so
+    /// that a frame allocates only its output: the frame's information, the mode, the
+    /// marginal certainties and the factorizations' scratch.
+    frame_info: DMatrix<f64>,
+    mode: DVector<f64>,
+    cumulative: Vec<f64>,
+    per_frame: Vec<f64>,
+    scratch: InfoScratch,
 }
 
 impl OnlineCalibrator {
@@ -203,6 +231,11 @@ impl OnlineCalibrator {
             next: ctx.beta.clone(),
             residual_scale: 1.0,
             residuals: Vec::new(),
+            frame_info: DMatrix::zeros(mean.len(), mean.len()),
+            mode: DVector::zeros(mean.len()),
+            cumulative: Vec::with_capacity(mean.len()),
+            per_frame: Vec::with_capacity(mean.len()),
+            scratch: InfoScratch::default(),
             ctx,
             solver,
             ws,
@@ -316,31 +349,35 @@ impl OnlineCalibrator {
     /// Track one frame and update the shape estimate (crate docs). Never returns a non-finite
     /// value or an invalid shape: a frame that cannot be solved keeps the previous pose and
     /// estimate and is flagged (`no_hand`, `solver_failed`).
+    ///
+    /// The record's `timing_us` splits the frame (µs) so that it compares stage by stage with
+    /// the plain tracker's ([`hmodel_spheremesh::Tracker::track`]): `correspondences` (the
+    /// context refreshes of the LM), `solve` (the rest of the LM: terms, factorization),
+    /// and what calibrating adds — `reshape` (the template and the collision term rebuilt on
+    /// a moved β), `laplace` (Eq. 4.5) and `filter` (the estimator and the certainties) —
+    /// and `track` (the whole call).
     pub fn track(&mut self, frame: &PreprocessedFrame, index: u64, timestamp: f64) -> OnlineFrame {
         let start = Instant::now();
         let mut rec = HandRecord::for_frame(index, timestamp);
         let k = self.problem.layout.active.len();
-        let mut frame_info = DMatrix::zeros(k, k);
+        self.frame_info.fill(0.0);
         let mut solved = false;
         let finite_points = frame
             .points
             .iter()
             .filter(|p| p.iter().all(|v| v.is_finite()));
+        let mut reshape_us = 0.0;
         if finite_points.count() >= self.config.min_points.max(1) {
-            let t0 = Instant::now();
             self.ctx.tracking.set_frame(frame);
             if !self.initialized {
                 self.pose = self.placed_pose(&frame.points);
                 self.initialized = true;
             }
-            self.ctx.prior = (self.config.estimator == Estimator::Iekf).then(|| {
-                (
-                    self.belief.mean.iter().copied().collect(),
-                    self.belief.information.clone(),
-                )
-            });
+            self.set_prior();
+            let t = Instant::now();
             self.problem
                 .refresh_collision(&self.ctx, &self.config.tracker);
+            reshape_us += t.elapsed().as_secs_f64() * 1e6;
             let saved = (self.ctx.beta.clone(), self.ctx.latent);
             let temporal = self.config.tracker.enabled.temporal;
             let terms = self.problem.terms(
@@ -349,10 +386,15 @@ impl OnlineCalibrator {
             );
             let mut callback = ShapeCallback {
                 problem: &self.problem,
+                iterations: self.solver.options().iterations,
                 next: std::mem::take(&mut self.next),
                 rejected: 0,
+                reshape_us: 0.0,
+                correspondences_us: 0.0,
             };
             let mut pose = self.pose.clone();
+            self.problem.data.capture_next(false);
+            let t0 = Instant::now();
             let result = self.solver.solve(
                 &mut self.ws,
                 &self.problem.base.skeleton,
@@ -361,18 +403,35 @@ impl OnlineCalibrator {
                 terms.as_slice(),
                 &mut callback,
             );
+            let lm_us = t0.elapsed().as_secs_f64() * 1e6;
             self.next = callback.next;
             let ok = matches!(result, Ok(r) if r.termination.was_successful())
                 && pose.values.iter().all(|v| v.is_finite());
+            reshape_us += callback.reshape_us;
             rec.timing_us
-                .insert("solve".into(), t0.elapsed().as_secs_f64() * 1e6);
+                .insert("correspondences".into(), callback.correspondences_us);
+            rec.timing_us.insert(
+                "solve".into(),
+                lm_us - callback.correspondences_us - callback.reshape_us,
+            );
             if ok {
                 let t1 = Instant::now();
                 // Eq. 4.5 at the last linearization: the data terms' Gauss–Newton Hessian,
-                // marginalized over the pose.
-                let info = self.problem.data_information(&self.ctx, &mut self.data_ne);
-                if let Some(h) = info {
-                    frame_info = h * self.config.measurement_weight;
+                // marginalized over the pose — as the solve's last evaluation assembled it, or
+                // assembled here when the solve left no copy.
+                let (scratch, info) = (&mut self.scratch, &mut self.frame_info);
+                let measured = self.problem.captured_information(scratch, info)
+                    || self.problem.data_information_into(
+                        &self.ctx,
+                        &mut self.data_ne,
+                        scratch,
+                        info,
+                    );
+                self.problem.data.capture_next(false);
+                if !measured {
+                    self.frame_info.fill(0.0);
+                } else {
+                    self.frame_info *= self.config.measurement_weight;
                     solved = true;
                     self.pose = pose;
                     self.residual_scale =
@@ -398,24 +457,25 @@ impl OnlineCalibrator {
         }
         // The estimators (§4.3.1–4.3.3).
         let t2 = Instant::now();
-        let layout = &self.problem.layout;
-        let mode = DVector::from_iterator(k, layout.active.iter().map(|&i| self.ctx.beta[i]));
+        for (m, &i) in self.mode.iter_mut().zip(&self.problem.layout.active) {
+            *m = self.ctx.beta[i];
+        }
+        let (mode, frame_info) = (&self.mode, &self.frame_info);
         if solved {
             match self.config.estimator {
                 Estimator::PerFrame => {
-                    self.belief = ShapeBelief {
-                        mean: mode.clone(),
-                        information: frame_info.clone(),
-                    };
+                    self.belief.mean.copy_from(mode);
+                    self.belief.information.copy_from(frame_info);
                 }
                 Estimator::Kf => {
-                    self.belief.fuse(&mode, &frame_info);
+                    self.belief.fuse(mode, frame_info);
                 }
                 Estimator::Iekf => {
-                    self.belief.absorb(&mode, &frame_info);
+                    self.belief.absorb(mode, frame_info);
                 }
             }
         }
+        let t3 = Instant::now();
         if self.ctx.dirty {
             if let Ok(t) = self.problem.basis.apply(&self.problem.base, &self.ctx.beta) {
                 if self.ctx.tracking.set_template(t).is_ok() {
@@ -423,6 +483,8 @@ impl OnlineCalibrator {
                 }
             }
         }
+        let tail_reshape_us = t3.elapsed().as_secs_f64() * 1e6;
+        reshape_us += tail_reshape_us;
         let frame_beta = self.ctx.beta.clone();
         let beta = self.estimate(&frame_beta);
         let n = self.problem.basis.len();
@@ -430,20 +492,34 @@ impl OnlineCalibrator {
         let mut frame_certainty = vec![0.0; n];
         let mut marginal = vec![0.0; n];
         let mut frame_marginal = vec![0.0; n];
-        let cumulative = self.belief.marginal_certainty();
-        let per_frame = if solved {
-            marginal_certainty(&frame_info, self.config.initial_information)
+        marginal_certainty_into(
+            &self.belief.information,
+            0.0,
+            &mut self.scratch,
+            &mut self.cumulative,
+        );
+        if solved {
+            marginal_certainty_into(
+                &self.frame_info,
+                self.config.initial_information,
+                &mut self.scratch,
+                &mut self.per_frame,
+            );
         } else {
-            vec![0.0; k]
-        };
+            self.per_frame.clear();
+            self.per_frame.resize(k, 0.0);
+        }
         for (j, &i) in self.problem.layout.active.iter().enumerate() {
             certainty[i] = self.belief.information[(j, j)];
-            frame_certainty[i] = frame_info[(j, j)];
-            marginal[i] = cumulative.get(j).copied().unwrap_or(0.0);
-            frame_marginal[i] = per_frame.get(j).copied().unwrap_or(0.0);
+            frame_certainty[i] = self.frame_info[(j, j)];
+            marginal[i] = self.cumulative.get(j).copied().unwrap_or(0.0);
+            frame_marginal[i] = self.per_frame.get(j).copied().unwrap_or(0.0);
         }
-        rec.timing_us
-            .insert("filter".into(), t2.elapsed().as_secs_f64() * 1e6);
+        rec.timing_us.insert(
+            "filter".into(),
+            t2.elapsed().as_secs_f64() * 1e6 - tail_reshape_us,
+        );
+        rec.timing_us.insert("reshape".into(), reshape_us);
         let t = self.ctx.tracking.template();
         let posed = PosedSphereMesh::new(t, &self.pose);
         let names = t.skeleton.dofs().iter().map(|d| d.name.as_str());
@@ -463,6 +539,29 @@ impl OnlineCalibrator {
             marginal_certainty: marginal,
             frame_marginal_certainty: frame_marginal,
             solved,
+        }
+    }
+
+    /// E_iekf's prior `(x̂_{n−1}, Σ̂⁻¹_{n−1})` in the context for the joint estimator (none for
+    /// the others), copied into the previous frame's buffers when it has them.
+    fn set_prior(&mut self) {
+        if self.config.estimator != Estimator::Iekf {
+            self.ctx.prior = None;
+            return;
+        }
+        let belief = &self.belief;
+        match &mut self.ctx.prior {
+            Some((mean, info)) if info.shape() == belief.information.shape() => {
+                mean.clear();
+                mean.extend(belief.mean.iter().copied());
+                info.copy_from(&belief.information);
+            }
+            prior => {
+                *prior = Some((
+                    belief.mean.iter().copied().collect(),
+                    belief.information.clone(),
+                ))
+            }
         }
     }
 

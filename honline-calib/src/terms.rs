@@ -4,7 +4,7 @@
 //! tracker's ([`hmodel_spheremesh::terms`], [`hand_model::solver::terms`]), run on the same
 //! context through [`PoseContext`] or [`Lifted`].
 
-use std::cell::RefCell;
+use std::cell::{RefCell, RefMut};
 
 use hand_model::kinematics::{Pose, PosedSkeleton, Skeleton};
 use hand_model::solver::{EnergyTerm, NormalEquations, PoseContext, TermError, TermStats};
@@ -84,12 +84,63 @@ impl<T: EnergyTerm<TrackingCtx<'static>>> EnergyTerm<OnlineCtx> for Lifted<T> {
 
 /// E_d2m + E_m2d (Eq. 4.2's data terms, Eq. 3.4–3.5) over pose *and* the active β: the rows of
 /// [`ShapeRows`] (shared with the offline calibration), columns exact.
+///
+/// It can keep a copy of the system it adds on one chosen evaluation
+/// ([`ShapeData::capture_next`]): the online calibrator's Laplace information (Eq. 4.5) is this
+/// term's Hessian at the last linearization of the solve, which the LM's final evaluation has
+/// just assembled — kept, it need not be assembled a second time (one full pass over the rows).
 pub struct ShapeData {
     space: ShapeSpace,
     /// Per unknown of `space`, its index in the system.
     map: Vec<Option<usize>>,
     weights: DataWeights,
     rows: RefCell<ShapeRows>,
+    capture: RefCell<Capture>,
+}
+
+/// The copy of the data system taken by [`ShapeData::capture_next`], with its scratch.
+struct Capture {
+    /// Whether the next evaluation is copied.
+    armed: bool,
+    /// Whether `ne` holds the copy of the last armed evaluation.
+    valid: bool,
+    ne: NormalEquations,
+    /// `0..dim` (the columns of the copy) and the packed upper triangle of the system.
+    all: Vec<usize>,
+    upper: Vec<f64>,
+}
+
+impl Capture {
+    fn new(n: usize) -> Self {
+        Self {
+            armed: false,
+            valid: false,
+            ne: NormalEquations::new(n),
+            all: (0..n).collect(),
+            upper: Vec::with_capacity(n * (n + 1) / 2),
+        }
+    }
+
+    /// Copy `ne` (upper triangle and `b`) into the capture: `0 + x` for every entry, so the
+    /// copy has the bits of the original (a −0 becomes +0).
+    fn copy(&mut self, ne: &NormalEquations) {
+        let n = self.all.len();
+        self.upper.clear();
+        for a in 0..n {
+            self.upper.extend((a..n).map(|b| ne.lhs_entry(a, b)));
+        }
+        self.ne.clear();
+        self.valid = self
+            .ne
+            .add_packed_block(&self.all, &self.upper, ne.rhs().as_slice())
+            .is_ok();
+    }
+}
+
+/// Whether every entry of `A`'s upper triangle and of `b` is zero (a cleared system).
+fn is_cleared(ne: &NormalEquations) -> bool {
+    let n = ne.dim();
+    ne.rhs().iter().all(|&v| v == 0.0) && (0..n).all(|j| (0..=j).all(|i| ne.lhs_entry(i, j) == 0.0))
 }
 
 impl ShapeData {
@@ -101,10 +152,30 @@ impl ShapeData {
         }
         Self {
             rows: RefCell::new(ShapeRows::new(layout.dim())),
+            capture: RefCell::new(Capture::new(layout.dim())),
             space,
             map,
             weights,
         }
+    }
+
+    /// Copy the system of the next [`EnergyTerm::accumulate`] (`on`), or not; forgets the
+    /// previous copy either way. Only an evaluation that starts on a cleared system (this
+    /// term first, as [`crate::OnlineCalibrator`] orders them) is copied: then the copy is
+    /// exactly this term's part.
+    pub fn capture_next(&self, on: bool) {
+        if let Ok(mut c) = self.capture.try_borrow_mut() {
+            c.armed = on;
+            c.valid = false;
+        }
+    }
+
+    /// The system copied by the evaluation [`ShapeData::capture_next`] armed (upper triangle
+    /// as accumulated), if it ran; it equals a fresh `accumulate` on a cleared system at the
+    /// same context.
+    pub(crate) fn captured(&self) -> Option<RefMut<'_, NormalEquations>> {
+        let c = self.capture.try_borrow_mut().ok()?;
+        c.valid.then(|| RefMut::map(c, |c| &mut c.ne))
     }
 }
 
@@ -124,6 +195,10 @@ impl EnergyTerm<OnlineCtx> for ShapeData {
         let Ok(mut rows) = self.rows.try_borrow_mut() else {
             return Err(TermError::Failed("data term re-entered"));
         };
+        let mut capture = self.capture.try_borrow_mut().ok().filter(|c| c.armed);
+        let fresh = capture
+            .as_ref()
+            .is_some_and(|c| ne.dim() == c.all.len() && is_cleared(ne));
         let e = rows.add_frame(
             &ctx.tracking,
             &self.space,
@@ -133,6 +208,12 @@ impl EnergyTerm<OnlineCtx> for ShapeData {
             &mut [],
             0,
         );
+        if let Some(c) = capture.as_mut() {
+            c.armed = false;
+            if fresh {
+                c.copy(ne);
+            }
+        }
         Ok(TermStats {
             energy: e.d2m + e.m2d,
             rows: e.rows,

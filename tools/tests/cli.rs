@@ -696,7 +696,12 @@ fn bench_writes_positive_medians_as_json() {
     let positive = |x: &serde_json::Value| x.as_f64().is_some_and(|x| x > 0.0 && x.is_finite());
     assert!(positive(&v["baseline_us"]), "{v}");
     let singles = v["single_thread"].as_array().expect("single_thread");
-    assert_eq!(singles.len(), 2, "both models by default");
+    let models: Vec<&str> = singles.iter().filter_map(|s| s["model"].as_str()).collect();
+    assert_eq!(
+        models,
+        ["spheremesh", "cylinders", "online"],
+        "all models by default"
+    );
     for s in singles {
         for stage in ["correspondences_us", "solve_us", "track_us"] {
             assert!(positive(&s["per_frame"][stage]), "{stage}: {s}");
@@ -704,7 +709,19 @@ fn bench_writes_positive_medians_as_json() {
             assert!(s["per_frame"]["other_us"].is_f64(), "{s}");
         }
         assert!(positive(&s["frames_per_s"]) && positive(&s["ratio_to_baseline"]));
+        assert!(positive(&s["ratio_to_spheremesh"]), "{s}");
+        assert!(positive(&s["goal_us"]), "{s}");
+        // The calibration stages belong to the online calibrator alone.
+        let online = s["model"] == "online";
+        for stage in ["reshape_us", "laplace_us", "filter_us"] {
+            let v = &s["per_frame"][stage];
+            assert!(
+                if online { positive(v) } else { v.is_null() },
+                "{stage}: {s}"
+            );
+        }
     }
+    assert!(text.contains("× spheremesh"), "{text}");
     for c in v["two_cores"].as_array().expect("two_cores") {
         assert!(positive(&c["sequential_frames_per_s"]) && positive(&c["parallel_frames_per_s"]));
         assert!(positive(&c["speedup"]), "{c}");

@@ -1,0 +1,127 @@
+//! One frame of joint cumulative calibration + tracking (issue 8 "Speed"): the default online
+//! calibrator (IEKF, observable β, 1 rigid + 7 iterations, PCA pose prior) on ~2500 sensor
+//! points, one core, in a warm state — the belief has absorbed a few dozen frames of a bending
+//! subject, and the frame starts from the previous frame's true pose (one 30 Hz step of the
+//! bending motion: the work of a tracked frame, not of a converged one). The plain sphere-mesh
+//! tracker (Ch. 3) on the same frame is the baseline measured in the same run: the ratio of
+//! the two is the cost of calibrating while tracking.
+//!
+//! Run with `cargo bench -p honline-calib --bench online`; besides criterion's estimates it
+//! prints the medians of the calibrator's own per-stage timings (`timing_us`) and the ratio.
+
+#[path = "../tests/common/mod.rs"]
+mod common;
+
+use std::hint::black_box;
+
+use common::{pose, subject};
+use criterion::{criterion_group, criterion_main, Criterion};
+use hand_model::solver::PcaPrior;
+use hand_model::spheremesh::default_right_hand;
+use hmodel_spheremesh::synthetic::rendered_frame;
+use hmodel_spheremesh::{Tracker, TrackerConfig};
+use honline_calib::{OnlineCalibrator, OnlineConfig};
+use sensor_io::record::HandRecord;
+use sensor_io::Camera;
+
+/// The issue's point count.
+const POINTS: usize = 2500;
+/// Frames the calibrator tracks before the clock runs (the belief accumulates them).
+const WARM_FRAMES: usize = 30;
+/// Frames timed for the per-stage medians.
+const STAGE_FRAMES: usize = 30;
+/// The stages the calibrator reports in `timing_us`, in the order of a frame.
+const STAGES: [&str; 6] = [
+    "correspondences",
+    "reshape",
+    "solve",
+    "laplace",
+    "filter",
+    "track",
+];
+
+/// The median of each stage of `STAGES` over `records`' `timing_us` (NaN where absent).
+fn stage_medians<'a>(records: impl Iterator<Item = &'a HandRecord>) -> [f64; STAGES.len()] {
+    let mut stages = STAGES.map(|_| Vec::new());
+    for rec in records {
+        for (v, key) in stages.iter_mut().zip(STAGES) {
+            v.push(rec.timing_us.get(key).copied().unwrap_or(f64::NAN));
+        }
+    }
+    stages.map(|mut v| {
+        v.sort_by(f64::total_cmp);
+        v[v.len() / 2]
+    })
+}
+
+/// `medians` as `key value` pairs.
+fn stage_line(medians: &[f64]) -> String {
+    let line: Vec<String> = STAGES
+        .iter()
+        .zip(medians)
+        .map(|(k, v)| format!("{k} {v:.0}"))
+        .collect();
+    line.join(", ")
+}
+
+fn bench_online(c: &mut Criterion) {
+    let base = default_right_hand();
+    let (_, truth) = subject(&base, 0.1, 3);
+    let camera = Camera::sr300_qvga();
+    let prior = PcaPrior::project_default();
+    let mut calib = OnlineCalibrator::new(&base, OnlineConfig::default(), Some(&prior)).unwrap();
+    calib.set_pose(&pose(&truth, 0, true)).unwrap();
+    for k in 0..WARM_FRAMES {
+        let f = rendered_frame(&truth, &pose(&truth, k, true), &camera, POINTS).unwrap();
+        assert!(calib.track(&f, k as u64, k as f64 / 30.0).solved);
+    }
+    let exact = pose(&truth, WARM_FRAMES, true);
+    let from = pose(&truth, WARM_FRAMES - 1, true);
+    let frame = rendered_frame(&truth, &exact, &camera, POINTS).unwrap();
+    eprintln!("{} points", frame.points.len());
+
+    let online: Vec<HandRecord> = (0..STAGE_FRAMES)
+        .map(|k| {
+            calib.set_pose(&from).unwrap();
+            let out = calib.track(&frame, k as u64, 0.0);
+            assert!(out.solved);
+            out.record
+        })
+        .collect();
+    let online = stage_medians(online.iter());
+    eprintln!("online timing_us medians: {}", stage_line(&online));
+
+    // The plain tracker of the subject's true template on the same frame.
+    let mut tracker = Tracker::new(&truth, TrackerConfig::default(), Some(&prior)).unwrap();
+    let plain: Vec<HandRecord> = (0..STAGE_FRAMES)
+        .map(|k| {
+            tracker.set_pose(&from).unwrap();
+            tracker.track(&frame, k as u64, 0.0)
+        })
+        .collect();
+    let plain = stage_medians(plain.iter());
+    eprintln!("spheremesh timing_us medians: {}", stage_line(&plain));
+    let total = STAGES.len() - 1;
+    eprintln!(
+        "online / spheremesh (track): {:.2}×",
+        online[total] / plain[total]
+    );
+
+    let mut group = c.benchmark_group("online_frame_2500");
+    group.bench_function("online_iekf", |b| {
+        b.iter(|| {
+            calib.set_pose(&from).unwrap();
+            black_box(calib.track(black_box(&frame), 0, 0.0))
+        })
+    });
+    group.bench_function("spheremesh_baseline", |b| {
+        b.iter(|| {
+            tracker.set_pose(&from).unwrap();
+            black_box(tracker.track(black_box(&frame), 0, 0.0))
+        })
+    });
+    group.finish();
+}
+
+criterion_group!(benches, bench_online);
+criterion_main!(benches);
