@@ -341,14 +341,13 @@ pub fn run_offline(
             let k = usable.len() - 1;
             let block = k / every * every;
             if rec.flags.is_empty() && !usable[block..k].iter().any(|&u| u) {
-                frames.push((k, f.clone()));
-                poses.push(Pose {
-                    values: sk
-                        .dofs()
-                        .iter()
-                        .map(|d| rec.pose.get(&d.name).copied().unwrap_or(0.0))
-                        .collect(),
-                });
+                let named = rec.pose.iter().map(|(n, &v)| (n.as_str(), v));
+                // A pose the skeleton refuses leaves the frame out; the check against
+                // `subsample` below then reports it.
+                if let Ok(pose) = Pose::from_named(sk, named) {
+                    frames.push((k, f.clone()));
+                    poses.push(pose);
+                }
             }
             rec
         },

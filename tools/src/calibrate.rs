@@ -11,6 +11,7 @@ use datasets::prior::authored_samples;
 use datasets::scans::{
     principal_extents, read_obj_points, scale_from_extents, sphere_principal_extents,
 };
+use eval::markers::median;
 use eval::plot::{line_plot_svg, Series};
 use hand_model::kinematics::names::DIGIT_DOFS;
 use hand_model::kinematics::Pose;
@@ -313,12 +314,6 @@ fn run_guide(args: &CalibrateArgs, base: &SphereMeshTemplate) -> Result<()> {
         png.display()
     );
     Ok(())
-}
-
-fn median(v: &[f64]) -> f64 {
-    let mut s = v.to_vec();
-    s.sort_by(f64::total_cmp);
-    s.get(s.len() / 2).copied().unwrap_or(0.0)
 }
 
 /// Save the calibrated template, print the outcome (energies, weakly constrained parameters)
@@ -644,9 +639,7 @@ fn offline_batch(
     let active = config.frame.subset.indices(&basis);
     // Unconstrained: active entries whose data information is below UNCONSTRAINED of the
     // active entries' median.
-    let mut sorted: Vec<f64> = active.iter().map(|&i| cal.certainty[i]).collect();
-    sorted.sort_by(f64::total_cmp);
-    let median = sorted.get(sorted.len() / 2).copied().unwrap_or(0.0);
+    let median = median(&active.iter().map(|&i| cal.certainty[i]).collect::<Vec<_>>());
     let names: Vec<&str> = basis.names().collect();
     let by_name = |values: &[f64]| -> serde_json::Map<String, serde_json::Value> {
         names
