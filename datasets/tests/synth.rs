@@ -129,7 +129,29 @@ fn segmentations_find_the_synthetic_hand() {
         &WristbandParams::default(),
         &mut seg,
     );
-    assert!(seg.wristband.is_some(), "the blue band was not found");
+    let band = seg.wristband.expect("the blue band was not found");
+    // The rendered band spans 35 mm along the wrist: its pixels reach about half of it
+    // toward the hand from their mean, and the silhouette holds nothing it hides.
+    assert!(
+        (10.0..25.0).contains(&band.reach),
+        "band reach {:.1} mm",
+        band.reach
+    );
+    let hidden = (0..seg.mask.data.len())
+        .filter(|&i| seg.mask.data[i] != 0 && f.frame.depth.data[i] != 0)
+        .filter(|&i| {
+            let (u, v) = (
+                (i % cam.width as usize) as f64,
+                (i / cam.width as usize) as f64,
+            );
+            band.hides(&cam.backproject(u, v, f.frame.depth.data[i] as f64))
+        })
+        .count();
+    assert!(
+        hidden * 50 < seg.count,
+        "{hidden} of {} silhouette pixels hidden",
+        seg.count
+    );
     let w_iou = iou(&seg.mask);
     let mut seg2 = HandSegment::default();
     segment_depth_only(

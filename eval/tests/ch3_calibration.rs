@@ -4,11 +4,13 @@
 //! that run — recovers the subject's rest sphere centers and radii, and tracking the teaser
 //! with the calibrated template comes close to tracking with the true one.
 //!
-//! Measured: centers < 1.5 mm and radii < 1 mm on every subject. Tracking the noise-free teaser
-//! with the calibrated template: 0.3–0.6 mm mean keypoint error against 0.2–0.26 mm with the
+//! Measured (robust d2m at 1 mm, model points hidden by the wristband not pushed by m2d):
+//! centers 0.40–1.16 mm and radii 0.06–0.21 mm on the five subjects (least squares with
+//! every model pixel pushed: 0.53–1.25 and 0.07–0.36 mm). Tracking the noise-free teaser with
+//! the calibrated template: 0.31–0.57 mm mean keypoint error against 0.17–0.26 mm with the
 //! true template and 2.5–9 mm with the default one — the issue's "within 10 %" of a 0.2 mm
-//! error is not reached (ratios up to 2.8); the test asserts that calibration removes at least
-//! 80 % of the default template's excess error and stays within 0.5 mm of the true template.
+//! error is not reached (ratios 1.7–2.4); the worst centers are the wrist's, whose far end
+//! the band hides and whose sides the rendered forearm covers.
 
 use eval::synthetic::{SyntheticRun, SyntheticSequence, SyntheticSpec};
 use hand_model::kinematics::Pose;
@@ -124,21 +126,21 @@ fn calibrates_random_subjects_from_eight_tracked_frames() {
         worst.0, worst.1, worst.2
     );
     assert!(worst.0 < 1.5 && worst.1 < 1.0, "{worst:?}");
+    assert!(
+        worst.2 < 3.0,
+        "calibrated/true teaser error ratio {:.2}",
+        worst.2
+    );
 }
 
-/// The same with the ToF noise model (issue 6 "With ToF noise: report"): two subjects, the
-/// robust (Huber, 1 mm) d2m; the calibrated template must still be closer to the truth than
-/// the default. Measured: centers 5.55 → 4.81 and 2.63 → 2.08 mm — noise costs most of the
-/// noise-free gain (least squares on the same frames made subject 1 worse: 7.74 mm).
+/// The same with the ToF noise model (issue 6 "With ToF noise: report"): two subjects; the
+/// calibrated template must still be closer to the truth than the default. Measured: centers
+/// 5.55 → 3.47 and 2.63 → 2.35 mm (radii 0.26 → 0.93, 0.48 → 0.85 mm: the noise thins them).
 #[test]
 fn calibration_with_tof_noise() {
     let base = default_right_hand();
     for seed in [1u64, 2] {
-        let config = CalibrationConfig {
-            robust: 1.0,
-            ..CalibrationConfig::default()
-        };
-        let (cal, truth, _) = calibrate_subject(seed, "tof", &config);
+        let (cal, truth, _) = calibrate_subject(seed, "tof", &CalibrationConfig::default());
         let (before, after) = (
             rest_sphere_errors(&base, &truth).unwrap(),
             rest_sphere_errors(&cal.template, &truth).unwrap(),

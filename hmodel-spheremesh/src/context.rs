@@ -299,7 +299,11 @@ impl<'m> TrackingCtx<'m> {
         self.update_pushes()
     }
 
-    /// The push constraints of Eq. 3.5 at the current pose (see [`M2dMode`]).
+    /// The push constraints of Eq. 3.5 at the current pose (see [`M2dMode`]). Model points
+    /// that the segmentation hides (under or beyond the wristband, [`SensorView::hides`]) are
+    /// not pushed: the silhouette is cut there whatever the hand's shape, and pushing them
+    /// pulled a longer wrist up into the palm during calibration (thesis §3.4; honline likewise
+    /// treats the wrist blocks apart, ANCHOR-FACTS §5.4).
     fn update_pushes(&mut self) -> Result<(), TermError> {
         let (Some(mode), Some(camera)) = (self.m2d, self.sensor.camera.as_ref()) else {
             return Ok(());
@@ -328,6 +332,9 @@ impl<'m> TrackingCtx<'m> {
                     let Some((nu, nv)) = sensor.nearest_pixel(u, v) else {
                         continue;
                     };
+                    if sensor.hides(&hit.point) {
+                        continue;
+                    }
                     let Some(pr) = self
                         .geometry
                         .project_on_element(hit.element as usize, &hit.point)
@@ -346,7 +353,7 @@ impl<'m> TrackingCtx<'m> {
             M2dMode::Centers => {
                 for (i, s) in self.posed.spheres.iter().enumerate() {
                     let e = self.sphere_element[i];
-                    if e == u32::MAX || s.center.z <= 0.0 {
+                    if e == u32::MAX || s.center.z <= 0.0 || sensor.hides(&s.center) {
                         continue;
                     }
                     let px = camera.project(&s.center);

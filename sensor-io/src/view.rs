@@ -5,7 +5,7 @@
 use nalgebra::Vector3;
 
 use crate::dt::NO_PIXEL;
-use crate::preprocess::PreprocessedFrame;
+use crate::preprocess::{PreprocessedFrame, Wristband};
 use crate::Camera;
 
 /// What the image-space terms (E2D Eq. 2.3, E_wrist Eq. 2.4) read of the current frame: the
@@ -20,8 +20,8 @@ pub struct SensorView {
     /// Per pixel (`v·width + u`) the nearest silhouette pixel; [`NO_PIXEL`] everywhere when the
     /// silhouette is empty. Empty before the first frame.
     pub nearest: Vec<u32>,
-    /// Wristband center and unit axis toward the hand (camera frame, mm).
-    pub wristband: Option<(Vector3<f64>, Vector3<f64>)>,
+    /// The wristband of the frame, when the segmentation found one.
+    pub wristband: Option<Wristband>,
 }
 
 impl SensorView {
@@ -42,6 +42,13 @@ impl SensorView {
             self.camera = None;
         }
         self.wristband = frame.hand.wristband;
+    }
+
+    /// Whether the segmentation hides `p` (camera frame, mm): under the wristband or beyond it
+    /// ([`Wristband::hides`]); never without a band.
+    #[inline]
+    pub fn hides(&self, p: &Vector3<f64>) -> bool {
+        self.wristband.as_ref().is_some_and(|b| b.hides(p))
     }
 
     /// Whether pixel `(u, v)` (inside the image) belongs to the sensor silhouette `S_s`.

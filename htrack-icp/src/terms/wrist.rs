@@ -89,11 +89,10 @@ impl EnergyTerm<TrackingCtx<'_>> for Wrist {
         ne: &mut NormalEquations,
     ) -> Result<TermStats, TermError> {
         let sensor = ctx.sensor();
-        let (Some(camera), Some((center, axis))) = (sensor.camera.as_ref(), sensor.wristband)
-        else {
+        let (Some(camera), Some(band)) = (sensor.camera.as_ref(), sensor.wristband) else {
             return Ok(TermStats::ZERO);
         };
-        let Some((c_px, n)) = band_line(camera, &center, &axis) else {
+        let Some((c_px, n)) = band_line(camera, &band.center, &band.axis) else {
             return Ok(TermStats::ZERO);
         };
         let (bone, local) = ctx
@@ -134,6 +133,7 @@ mod tests {
     use hand_model::solver::terms::DampingParams;
     use hand_model::solver::LmOptions;
     use hand_model::spheremesh::default_right_hand;
+    use sensor_io::preprocess::Wristband;
     use sensor_io::Camera;
 
     use super::*;
@@ -160,19 +160,23 @@ mod tests {
 
     /// A wristband on the forearm axis of `pose`: 40 mm proximal of the wrist keypoint, the
     /// axis along the palm's +y (toward the hand).
-    fn band_of(model: &CylinderModel, pose: &Pose) -> (Vector3<f64>, Vector3<f64>) {
+    fn band_of(model: &CylinderModel, pose: &Pose) -> Wristband {
         let posed = model.posed(pose).unwrap();
         let (bone, local) = model.keypoint_on_bone(0).unwrap();
         let root = posed.point(bone, &local);
         let palm = model.skeleton.bone_index("palm").unwrap();
         let axis = posed.globals[palm].rotation * Vector3::y();
-        (root - axis * 40.0, axis)
+        Wristband {
+            center: root - axis * 40.0,
+            axis,
+            reach: 15.0,
+        }
     }
 
     fn ctx_with<'m>(
         model: &'m CylinderModel,
         pose: &Pose,
-        band: Option<(Vector3<f64>, Vector3<f64>)>,
+        band: Option<Wristband>,
     ) -> TrackingCtx<'m> {
         let mut ctx = TrackingCtx::new(model, View::Orthographic, IrlsParams::default());
         ctx.sensor_mut().camera = Some(camera());
@@ -238,7 +242,11 @@ mod tests {
         let ctx = ctx_with(
             &model,
             &pose,
-            Some((Vector3::new(0.0, 0.0, 400.0), Vector3::z())),
+            Some(Wristband {
+                center: Vector3::new(0.0, 0.0, 400.0),
+                axis: Vector3::z(),
+                reach: 15.0,
+            }),
         );
         assert_eq!(term.accumulate(&ctx, &mut ne).unwrap(), TermStats::ZERO);
         assert!(ne.rhs().iter().all(|&v| v == 0.0));

@@ -14,6 +14,6 @@ pub use normals::depth_normals;
 pub use pipeline::{PreprocessConfig, PreprocessedFrame, Preprocessor, Segmentation, Subsampling};
 pub use segment::{
     rgb_to_hsv, segment_depth_only, segment_wristband, DepthOnlyParams, HandSegment,
-    SegmentScratch, WristbandParams,
+    SegmentScratch, Wristband, WristbandParams,
 };
 pub use subsample::{subsample_uniform, FarthestSampler};

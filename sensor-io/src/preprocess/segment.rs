@@ -19,9 +19,31 @@ pub struct HandSegment {
     pub count: usize,
     /// Estimated palm center (camera frame, mm), when a hand was found.
     pub palm_center: Option<Vector3<f64>>,
-    /// Wristband center and unit axis pointing toward the hand (wristband segmentation only);
-    /// used by the wrist term of Eq. 2.4.
-    pub wristband: Option<(Vector3<f64>, Vector3<f64>)>,
+    /// The wristband (wristband segmentation only); used by the wrist term of Eq. 2.4 and to
+    /// tell where the silhouette was cut.
+    pub wristband: Option<Wristband>,
+}
+
+/// The wristband found by [`segment_wristband`].
+#[derive(Copy, Clone, Debug, PartialEq)]
+pub struct Wristband {
+    /// Mean 3D point of the band's pixels (camera frame, mm).
+    pub center: Vector3<f64>,
+    /// Unit axis from the band toward the hand.
+    pub axis: Vector3<f64>,
+    /// How far (mm) along `axis` from `center` the band's pixels reach (98th percentile): the
+    /// silhouette starts there.
+    pub reach: f64,
+}
+
+impl Wristband {
+    /// Whether `p` lies where the segmentation cannot see the hand: under the band or on its
+    /// forearm side. The silhouette is cut there whatever the hand looks like, so a model point
+    /// there that falls outside the silhouette is no evidence against the model (the model's
+    /// wrist may extend under the band; thesis §2.2 keeps only the hand side of the band).
+    pub fn hides(&self, p: &Vector3<f64>) -> bool {
+        (p - self.center).dot(&self.axis) < self.reach
+    }
 }
 
 /// Reusable buffers of [`segment_depth_only`], so that segmenting a frame allocates nothing once
@@ -571,6 +593,12 @@ pub fn segment_wristband(
     if balance < 0.0 {
         dir = -dir;
     }
+    let mut along: Vec<f64> = band_px
+        .iter()
+        .map(|&i| (point(depth, camera, i) - center).dot(&dir))
+        .collect();
+    along.sort_by(f64::total_cmp);
+    let reach = along[(along.len() - 1) * 98 / 100].max(0.0);
     let crop_c = center + dir * params.crop_offset;
     let r2 = params.crop_radius * params.crop_radius;
     for (i, &l) in label.iter().enumerate() {
@@ -583,7 +611,11 @@ pub fn segment_wristband(
         }
     }
     out.count = out.mask.count();
-    out.wristband = Some((center, dir));
+    out.wristband = Some(Wristband {
+        center,
+        axis: dir,
+        reach,
+    });
     if out.count > 0 {
         let c = (0..w * h)
             .filter(|&i| out.mask.data[i] != 0)
