@@ -3,6 +3,15 @@
 //! unit), compared with the original authors' fit: rest centers and radii after a similarity
 //! alignment, and the d2m residual of both fits on the scans. Skips (and says so) when the
 //! reference folder is absent.
+//!
+//! Measured ([`CalibrationConfig::clouds`], ring and pinky also searched as a pair; the
+//! authors' mm): d2m of the hand parts ours [1.19, 1.08, 1.06, 0.79, 1.14, 1.20], the authors'
+//! per-pose fits (every center free per pose) [1.36, 1.25, 1.29, 0.94, 1.15] on poses 1–5, the
+//! authors' final model pose-fitted by our search (mean 1.88) vs ours (mean 1.08). With the
+//! plain defaults and the single-digit search ours were [1.59, 1.50, 1.70, 0.98, 1.45, 1.59].
+//! Rest centers vs the authors' final model after a similarity: 11.58 mm (plain defaults
+//! 10.62 mm, the uncalibrated template 7.81 mm; the two models place their palm and wrist
+//! spheres differently), radii 1.88 mm (1.40 mm).
 
 use std::path::Path;
 
@@ -60,7 +69,7 @@ fn calibrates_to_the_real_scans_like_the_authors() {
         .map(|s| s.iter().map(|p| p / units_per_mm).collect())
         .collect();
     let search = CloudSearch::default();
-    let run = calibrate_clouds(&right, &mm, &search, &CalibrationConfig::default()).unwrap();
+    let run = calibrate_clouds(&right, &mm, &search, &CalibrationConfig::clouds()).unwrap();
     let (init, cal) = (&run.init, &run.calibration);
     println!(
         "initialization: {} hand (hypothesis energy {:.0} vs {:.0}); points kept after the forearm cut {:?} of {:?}; data energy per round (kept) {:?}",
@@ -225,7 +234,7 @@ fn calibrates_to_the_real_scans_like_the_authors() {
             let refined = refine_digits(&transplant.0, hand, &start, &search).unwrap();
             let config = CalibrationConfig {
                 fit_shape: false,
-                ..CalibrationConfig::default()
+                ..CalibrationConfig::clouds()
             };
             let frame = CalibrationFrame::cloud(hand.clone());
             let fit = calibrate(&transplant.0, &[frame], &[refined.pose], &config).unwrap();
@@ -262,7 +271,20 @@ fn calibrates_to_the_real_scans_like_the_authors() {
         mean(&ours) < mean(&initial),
         "calibration did not improve the fit"
     );
-    let _ = (centers, centers0, radii, mean(&theirs));
+    // Issue 6: ours not worse than the authors' per-pose fits on any scan they fitted.
+    for (k, (o, t)) in ours.iter().zip(&theirs).enumerate() {
+        assert!(
+            o <= t,
+            "pose {}: ours {o:.3} mm vs the authors' {t:.3} mm",
+            k + 1
+        );
+    }
+    // The shape stays near the authors' (measured 11.58 mm; the uncalibrated template 7.81).
+    assert!(
+        centers < 12.5,
+        "rest centers {centers:.2} mm from the authors'"
+    );
+    let _ = (centers0, radii);
 }
 
 /// The authors' final model carried onto `base`'s skeleton ([`fit_rest_spheres`]): their rest

@@ -112,7 +112,7 @@ pub struct CalibrateArgs {
     pub report: Option<PathBuf>,
     /// Calibration settings (JSON of `CalibrationConfig` for `spheremesh`, of `OfflineConfig`
     /// for the offline methods, whose `method` `--method` sets; missing fields keep their
-    /// defaults).
+    /// defaults). A folder of scans without it uses `CalibrationConfig::clouds`.
     #[arg(long)]
     pub config: Option<PathBuf>,
     /// Hand segmentation: auto, wristband, depth, presegmented.
@@ -436,7 +436,12 @@ fn run_scans(args: &CalibrateArgs, base: &SphereMeshTemplate, files: &[PathBuf])
         .iter()
         .map(|s| s.iter().map(|p| p / units).collect())
         .collect();
-    let config: CalibrationConfig = read_config(args.config.as_deref())?;
+    // Without a settings file, those for complete clouds; a file's missing fields keep the
+    // plain defaults.
+    let config = match args.config.as_deref() {
+        Some(path) => read_config(Some(path))?,
+        None => CalibrationConfig::clouds(),
+    };
     let run = calibrate_clouds(base, &mm, &CloudSearch::default(), &config)?;
     let init = &run.init;
     eprintln!(

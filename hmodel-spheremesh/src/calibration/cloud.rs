@@ -15,7 +15,8 @@
 //!   whose hypotheses explain the scans better is the scanned one; its poses then go through
 //!   [`refine_digits`], a per-digit coordinate search (one digit's flexion hypotheses at a time,
 //!   the rest of the pose held), since a single digit in the wrong valley is a local minimum
-//!   that neither the whole-hand hypotheses nor the pose LM leave.
+//!   that neither the whole-hand hypotheses nor the pose LM leave; then pairs of digits
+//!   ([`CloudSearch::digit_pairs`]) the same way.
 //!
 //! [`calibrate`] then fits shape and poses jointly on the hand parts; [`calibrate_clouds`] runs
 //! the whole chain, optionally alternating the per-digit search on the calibrated template with
@@ -47,11 +48,18 @@ pub struct CloudSearch {
     /// Huber threshold (mm) of the d2m during the search.
     pub robust: f64,
     /// Flexions (rad) tried per digit by the per-digit search ([`refine_digits`]), the thumb
-    /// also at every [`thumb_abduction`](Self::thumb_abduction); empty: no per-digit search.
+    /// also at every [`thumb_abduction`](Self::thumb_abduction); empty: no hypotheses (the pose
+    /// is still refitted, on half and then on the whole subsample).
     pub digit_bends: Vec<f64>,
+    /// Pairs of digits (DOF name prefixes) searched together by [`refine_digits`] after the
+    /// single digits, every combination of [`digit_bends`](Self::digit_bends) for the two. By
+    /// default ring and pinky, whose flexions go together: on scan 3 of `hand-scans-tkach` both
+    /// were in wrong valleys that no single-digit move leaves (25 more fits per scan).
+    pub digit_pairs: Vec<[String; 2]>,
     /// Rounds of [`calibrate_clouds`] after the first calibration: the digits searched again
     /// on the calibrated template, then calibrated again. Off by default: on the six real scans
-    /// of `hand-scans-tkach` a round raised the data energy (232 863 vs 232 181, not kept) at
+    /// of `hand-scans-tkach` (plain [`CalibrationConfig`] defaults, single-digit search) a
+    /// round raised the data energy (232 863 vs 232 181, not kept) at
     /// the cost of a second calibration.
     pub rounds: usize,
 }
@@ -67,6 +75,7 @@ impl Default for CloudSearch {
             thumb_abduction: vec![-0.4, 0.0, 0.7],
             robust: 3.0,
             digit_bends: vec![0.0, 0.4, 0.8, 1.2, 1.6],
+            digit_pairs: vec![["ring".into(), "pinky".into()]],
             rounds: 0,
         }
     }
@@ -379,8 +388,9 @@ fn digits(template: &SphereMeshTemplate) -> Vec<(String, Vec<usize>)> {
 /// the palm the other way) cannot climb out of, while [`initialize_cloud_pose`] only tries
 /// whole-hand bends. Hypotheses are screened like the coarse pass of [`initialize_cloud_pose`]
 /// (half the points, half the iterations), the current pose refitted the same way so that it
-/// competes on equal terms and stays unless a hypothesis explains the scan better; the winner
-/// is refined on the full subsample. Errors as [`calibrate`].
+/// competes on equal terms and stays unless a hypothesis explains the scan better; then every
+/// pair of `search.digit_pairs` at every combination of two bends; the winner is refined on the
+/// full subsample. Errors as [`calibrate`].
 pub fn refine_digits(
     template: &SphereMeshTemplate,
     points: &[Vector3<f64>],
@@ -391,28 +401,66 @@ pub fn refine_digits(
     let short = search.iterations / 2;
     let (mut energy, mut best) = fit_pose(template, &coarse, pose.clone(), short, search.robust)?;
     let sk = &template.skeleton;
-    for (digit, dofs) in digits(template) {
+    let digits = digits(template);
+    // One setting: all `flex` DOFs of a digit at a bend, its `abd` ones at the abduction when
+    // given. A step offers every hypothesis of one digit or pair, tried from the best so far.
+    type Setting<'a> = (&'a [usize], f64, Option<f64>);
+    let mut steps: Vec<Vec<Vec<Setting>>> = Vec::new();
+    for (digit, dofs) in &digits {
         let abductions: Vec<Option<f64>> = if digit == "thumb" {
             search.thumb_abduction.iter().copied().map(Some).collect()
         } else {
             vec![None]
         };
-        let mut trials = Vec::new();
-        for &bend in &search.digit_bends {
-            for &abduction in &abductions {
+        steps.push(
+            search
+                .digit_bends
+                .iter()
+                .flat_map(|&b| {
+                    abductions
+                        .iter()
+                        .map(move |&a| vec![(dofs.as_slice(), b, a)])
+                })
+                .collect(),
+        );
+    }
+    let find = |name: &str| digits.iter().find(|(d, _)| d == name).map(|(_, v)| v);
+    for [a, b] in &search.digit_pairs {
+        let (Some(da), Some(db)) = (find(a), find(b)) else {
+            continue;
+        };
+        steps.push(
+            search
+                .digit_bends
+                .iter()
+                .flat_map(|&x| {
+                    search
+                        .digit_bends
+                        .iter()
+                        .map(move |&y| vec![(da.as_slice(), x, None), (db.as_slice(), y, None)])
+                })
+                .collect(),
+        );
+    }
+    for step in steps {
+        let trials: Vec<Pose> = step
+            .iter()
+            .map(|settings| {
                 let mut p = best.clone();
-                for &i in &dofs {
-                    let name = &sk.dofs()[i].name;
-                    if name.contains("flex") {
-                        p.values[i] = bend;
-                    } else if let (Some(a), true) = (abduction, name.contains("abd")) {
-                        p.values[i] = a;
+                for &(dofs, bend, abduction) in settings {
+                    for &i in dofs {
+                        let name = &sk.dofs()[i].name;
+                        if name.contains("flex") {
+                            p.values[i] = bend;
+                        } else if let (Some(a), true) = (abduction, name.contains("abd")) {
+                            p.values[i] = a;
+                        }
                     }
                 }
                 p.clamp_to_limits(sk);
-                trials.push(p);
-            }
-        }
+                p
+            })
+            .collect();
         for p in trials {
             let (e, q) = fit_pose(template, &coarse, p, short, search.robust)?;
             if e < energy {
@@ -501,7 +549,8 @@ fn data_energy(c: &Calibration) -> f64 {
 /// pose, and a calibration from there. The first poses are found on the uncalibrated template,
 /// whose proportions differ from the hand's; a digit hypothesis that lost to a wrong one then
 /// may win on the calibrated shape, and the shape stops absorbing that pose error. A round is
-/// kept only if it lowers the data energy. Errors as [`initialize_clouds`] and [`calibrate`].
+/// kept only if it lowers the data energy. `config` is usually [`CalibrationConfig::clouds`].
+/// Errors as [`initialize_clouds`] and [`calibrate`].
 pub fn calibrate_clouds(
     base: &SphereMeshTemplate,
     scans: &[Vec<Vector3<f64>>],
