@@ -265,15 +265,21 @@ impl<'m> TrackingCtx<'m> {
             self.correspondences.fill(None);
             return Err(TermError::Failed("posed spheres are not finite"));
         }
+        // Seeded by each point's previous element: the same correspondences as the unseeded
+        // search (bit for bit, whatever the seeds), found with a tight bound from the start.
         if self.front_facing {
-            self.geometry.project_points_front_facing(
+            self.geometry.project_points_front_facing_seeded(
                 &self.points,
                 &self.view,
+                &mut self.seeds,
                 &mut self.correspondences,
             );
         } else {
-            self.geometry
-                .project_points(&self.points, &mut self.correspondences);
+            self.geometry.project_points_seeded(
+                &self.points,
+                &mut self.seeds,
+                &mut self.correspondences,
+            );
         }
         for (((c, p), u), (r, w)) in self
             .correspondences
