@@ -327,19 +327,22 @@ impl<'m> TrackingCtx<'m> {
             M2dMode::Render => {
                 let nearest = &sensor.nearest;
                 let (w, stride) = (camera.width as usize, self.m2d_stride as usize);
-                let outside = |i: usize| {
-                    (i % w) % stride == 0
-                        && (i / w) % stride == 0
-                        && nearest.get(i).is_none_or(|&n| n as usize != i)
-                };
-                let pixels = w * camera.height as usize;
-                if !self.render_mask_valid || self.render_mask.len() != pixels {
-                    self.render_mask.clear();
-                    self.render_mask.extend((0..pixels).map(outside));
+                let outside = |i: usize| nearest.get(i).is_none_or(|&n| n as usize != i);
+                let h = camera.height as usize;
+                if !self.render_mask_valid || self.render_mask.len() != w * h {
+                    let mask = &mut self.render_mask;
+                    mask.clear();
+                    mask.resize(w * h, false);
+                    for i in (0..h)
+                        .step_by(stride)
+                        .flat_map(|v| (v * w..(v + 1) * w).step_by(stride))
+                    {
+                        mask[i] = outside(i);
+                    }
                     self.render_mask_valid = true;
                 }
                 let mask = &self.render_mask;
-                let outside = |i: usize| mask.get(i).copied().unwrap_or_else(|| outside(i));
+                let outside = |i: usize| mask.get(i).copied().unwrap_or(false);
                 self.renderer
                     .render_hits(
                         &intrinsics(camera),
