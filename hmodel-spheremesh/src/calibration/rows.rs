@@ -14,11 +14,13 @@
 //! so the row is `j = z′ᵀE_e`, with `E_e` the `4m × K` matrix stacking per sphere `i` of the
 //! element (`m` of them) `[∂cᵢ/∂θ ∂cᵢ/∂β; 0 ∂rᵢ/∂β]` over the element's `K` columns, and
 //! `z′ = (wᵢ·[g; g·n])ᵢ` (`g` the row's direction: `u` for d2m, a row of `J_π` for m2d). The
-//! rows of an element then sum to `Eᵀ(Σ ω z′z′ᵀ)E`: each row adds to a `4m × 4m` moment
-//! (≤ 78 entries) and the product is formed once per element and evaluation
-//! ([`ShapeRows::add_frame`]; equal to the row-by-row sum up to rounding, tested).
+//! rows of an element then sum to `Eᵀ(Σ ω z′z′ᵀ)E`: each row adds `wₗwₗ′·ω zzᵀ` to the 4 × 4
+//! blocks of the sphere pairs it weights (a `4m × 4m` moment, `z = [g; g·n]`), and the product
+//! is formed once per element and evaluation ([`ShapeRows::add_frame`]; equal to the
+//! row-by-row sum up to rounding, tested). A row then costs at most 6 × 16 multiply-adds instead
+//! of `K(K+1)/2` scattered ones, and its pose columns are never formed.
 
-use hand_model::solver::{NormalEquations, PackedBlocks};
+use hand_model::solver::NormalEquations;
 use hand_model::spheremesh::PosedSphereMesh;
 use nalgebra::Vector3;
 
@@ -123,8 +125,6 @@ pub struct ShapeRows {
     columns: Vec<(usize, Vector3<f64>, f64)>,
     starts: Vec<usize>,
     elements: ElementMaps,
-    /// Per element the moment `Σ ω z′z′ᵀ` and `−Σ ω r z′` of its rows (module docs).
-    moments: Box<PackedBlocks>,
     /// Whether rows are summed per element (false: every row on its own, the reference the
     /// tests compare with).
     blocked: bool,
@@ -132,14 +132,80 @@ pub struct ShapeRows {
 
 /// Most spheres of an element (a wedge).
 const MAX_SPHERES: usize = 3;
+/// Most entries of `z′` (module docs): `[g; g·n]` per sphere.
+const Z: usize = 4 * MAX_SPHERES;
+
+/// The rows of one element summed in `z′` space (module docs): `Σ ω z′z′ᵀ`, of which only the
+/// 4 × 4 blocks of sphere pairs `l ≤ l′` are kept, and `Σ ω r z′`.
+#[derive(Copy, Clone)]
+struct Moment {
+    m: [[f64; Z]; Z],
+    v: [f64; Z],
+    used: bool,
+}
+
+impl Moment {
+    const ZERO: Self = Self {
+        m: [[0.0; Z]; Z],
+        v: [0.0; Z],
+        used: false,
+    };
+
+    /// Add the row `z′ = (wₗ z)ₗ` (`wl[..m]`, `z = [g; g·n]`) with residual `r` and weight `ω`:
+    /// multiples of one `ω zzᵀ` on fixed-size blocks, 16 multiply-adds per sphere pair that the
+    /// row weights (at most 6), with no `z′` formed.
+    #[inline]
+    fn add(&mut self, wl: &[f64; MAX_SPHERES], m: usize, z: &[f64; 4], r: f64, w: f64) {
+        let mut zz = [[0.0; 4]; 4];
+        for (row, &za) in zz.iter_mut().zip(z) {
+            for (x, &zb) in row.iter_mut().zip(z) {
+                *x = w * za * zb;
+            }
+        }
+        let m = m.min(MAX_SPHERES);
+        for l in 0..m {
+            if wl[l] == 0.0 {
+                continue;
+            }
+            let wr = w * r * wl[l];
+            for (v, &zc) in self.v[4 * l..4 * l + 4].iter_mut().zip(z) {
+                *v += wr * zc;
+            }
+            for l2 in l..m {
+                let c = wl[l] * wl[l2];
+                if c == 0.0 {
+                    continue;
+                }
+                for (row, zzr) in self.m[4 * l..4 * l + 4].iter_mut().zip(&zz) {
+                    for (x, &y) in row[4 * l2..4 * l2 + 4].iter_mut().zip(zzr) {
+                        *x += c * y;
+                    }
+                }
+            }
+        }
+        self.used = true;
+    }
+
+    /// Entry `(a, b)` of the symmetric `Σ ω z′z′ᵀ` from the kept blocks.
+    #[inline]
+    fn entry(&self, a: usize, b: usize) -> f64 {
+        if a / 4 <= b / 4 {
+            self.m[a][b]
+        } else {
+            self.m[b][a]
+        }
+    }
+}
 
 /// The matrices `E_e` of the module docs, rebuilt for every evaluation (allocation-free once
 /// sized), and the scratch of their products.
 #[derive(Default)]
 struct ElementMaps {
-    /// Per element its spheres and their count; `None` where its rows go one by one (not a pill
-    /// or wedge, too many elements for the moments, or a column outside the system).
+    /// Per element its spheres and their count; `None` where its rows go one by one (more than
+    /// three spheres, or a column outside the system).
     spheres: Vec<Option<([u32; MAX_SPHERES], usize)>>,
+    /// Per element the sums of its rows.
+    moments: Vec<Moment>,
     /// System indices of the columns of every element, element after element: element `e`
     /// has `cols[col_start[e]..col_start[e + 1]]`, its pose DOFs first.
     cols: Vec<usize>,
@@ -180,6 +246,8 @@ impl ElementMaps {
         let t = ctx.template();
         let (posed, jacobian) = (ctx.posed_mesh(), ctx.jacobian());
         self.spheres.clear();
+        self.moments.clear();
+        self.moments.resize(t.elements.len(), Moment::ZERO);
         self.cols.clear();
         self.col_start.clear();
         self.e.clear();
@@ -194,7 +262,7 @@ impl ElementMaps {
             let ids = def.element.spheres();
             let dofs = jacobian.dofs(el);
             // Pose DOFs first: slot j is the j-th DOF (distinct, sorted), as `columns` writes.
-            let mut ok = ids.len() <= MAX_SPHERES && PackedBlocks::fits(el, 4 * ids.len());
+            let mut ok = ids.len() <= MAX_SPHERES;
             for (j, &d) in dofs.iter().enumerate() {
                 ok &= self.slot(theta + d, start) == Some(j);
             }
@@ -245,77 +313,73 @@ impl ElementMaps {
         self.col_start.push(self.cols.len());
     }
 
-    /// `z′` (module docs) of a row with direction `[g; gn]` at the footpoint `spheres`,
-    /// `weights` on element `el`, and its length; `None` when the element has no map or a
-    /// weighted sphere is not the element's (that row goes on its own).
-    fn z(
-        &self,
+    /// Add a row with direction `z = [g; g·n]`, residual `r` and weight `w` at the footpoint
+    /// `spheres`, `weights` on element `el` to the element's moment; false when the element has
+    /// no map or a weighted sphere is not the element's (that row goes on its own).
+    #[inline]
+    fn add(
+        &mut self,
         el: usize,
-        spheres: &[u32; 3],
-        weights: &[f64; 3],
-        g: &Vector3<f64>,
-        gn: f64,
-    ) -> Option<([f64; 4 * MAX_SPHERES], usize)> {
-        let (ids, m) = (*self.spheres.get(el)?)?;
+        (spheres, weights): (&[u32; 3], &[f64; 3]),
+        z: &[f64; 4],
+        r: f64,
+        w: f64,
+    ) -> bool {
+        let (Some(&Some((ids, m))), Some(moment)) =
+            (self.spheres.get(el), self.moments.get_mut(el))
+        else {
+            return false;
+        };
         let mut wl = [0.0; MAX_SPHERES];
-        for (&s, &w) in spheres.iter().zip(weights) {
-            if w != 0.0 {
-                wl[ids[..m].iter().position(|&i| i == s)?] += w;
+        for (&s, &x) in spheres.iter().zip(weights) {
+            if x != 0.0 {
+                let Some(l) = ids[..m].iter().position(|&i| i == s) else {
+                    return false;
+                };
+                wl[l] += x;
             }
         }
-        let mut z = [0.0; 4 * MAX_SPHERES];
-        for (zl, w) in z.chunks_exact_mut(4).zip(&wl[..m]) {
-            zl.copy_from_slice(&[w * g.x, w * g.y, w * g.z, w * gn]);
-        }
-        Some((z, 4 * m))
+        moment.add(&wl, m, z, r, w);
+        true
     }
 
     /// Add `Eᵀ M E` and `Eᵀ v` of every element's moments to `ne` (and the diagonal to
     /// `info[k − from]` for unknowns `k ≥ from`).
-    fn flush(
-        &mut self,
-        moments: &PackedBlocks,
-        ne: &mut NormalEquations,
-        from: usize,
-        info: &mut [f64],
-    ) {
+    fn flush(&mut self, ne: &mut NormalEquations, from: usize, info: &mut [f64]) {
         for el in 0..self.spheres.len() {
-            let (Some((mom, v)), Some((_, m))) = (moments.block(el), self.spheres[el]) else {
+            let (Some((_, m)), mom) = (self.spheres[el], &self.moments[el]) else {
                 continue;
             };
+            if !mom.used {
+                continue;
+            }
             let d = 4 * m;
             let cols = &self.cols[self.col_start[el]..self.col_start[el + 1]];
             let k = cols.len();
             let e = &self.e[self.e_start[el]..self.e_start[el] + d * k];
-            if v.len() != d {
-                continue;
-            }
-            // M E, M symmetric from its packed upper triangle.
+            // M E.
             self.me.clear();
             self.me.resize(d * k, 0.0);
-            let mut off = 0;
             for a in 0..d {
-                for b in a..d {
-                    let x = mom[off + b - a];
-                    add_scaled(&mut self.me[a * k..(a + 1) * k], x, &e[b * k..(b + 1) * k]);
-                    if b != a {
-                        add_scaled(&mut self.me[b * k..(b + 1) * k], x, &e[a * k..(a + 1) * k]);
+                for b in 0..d {
+                    let x = mom.entry(a, b);
+                    if x != 0.0 {
+                        add_scaled(&mut self.me[a * k..(a + 1) * k], x, &e[b * k..(b + 1) * k]);
                     }
                 }
-                off += d - a;
             }
-            // Eᵀ (M E), upper triangle packed row by row, and Eᵀ v.
+            // Eᵀ (M E), upper triangle packed row by row, and b = −Eᵀ v.
             self.upper.clear();
             self.upper.resize(k * (k + 1) / 2, 0.0);
             self.rhs.clear();
             self.rhs.resize(k, 0.0);
-            for (i, &vi) in v.iter().enumerate() {
+            for (i, &vi) in mom.v[..d].iter().enumerate() {
                 let (er, mr) = (&e[i * k..(i + 1) * k], &self.me[i * k..(i + 1) * k]);
                 let mut off = 0;
                 for (p, &x) in er.iter().enumerate() {
                     if x != 0.0 {
                         add_scaled(&mut self.upper[off..off + k - p], x, &mr[p..]);
-                        self.rhs[p] += x * vi;
+                        self.rhs[p] -= x * vi;
                     }
                     off += k - p;
                 }
@@ -349,7 +413,6 @@ impl ShapeRows {
             columns: Vec::new(),
             starts: Vec::new(),
             elements: ElementMaps::default(),
-            moments: Box::new(PackedBlocks::new()),
             blocked: true,
         }
     }
@@ -403,13 +466,9 @@ impl ShapeRows {
         (theta, ne, from, info): (usize, &mut NormalEquations, usize, &mut [f64]),
     ) -> f64 {
         let (el, spheres, weights) = (at.0 as usize, at.1, at.2);
-        let z = self
-            .blocked
-            .then(|| self.elements.z(el, spheres, weights, g, gn));
-        if let Some((z, d)) = z.flatten() {
-            if self.moments.add_row(el, &z[..d], r, w).is_ok() {
-                return w * r * r;
-            }
+        let z = [g.x, g.y, g.z, gn];
+        if self.blocked && self.elements.add(el, (spheres, weights), &z, r, w) {
+            return w * r * r;
         }
         let mut cols = [Vector3::zeros(); MAX_ELEMENT_DOFS];
         let dofs = ctx
@@ -443,7 +502,6 @@ impl ShapeRows {
         let theta = layout.pose;
         self.elements
             .build(ctx, &self.columns, &self.starts, theta, ne.dim());
-        self.moments.clear();
         let irls = ctx.irls();
         let mut out = DataEnergy::default();
         for (c, u, r, wr) in ctx.d2m_rows() {
@@ -477,7 +535,7 @@ impl ShapeRows {
                 }
             }
         }
-        self.elements.flush(&self.moments, ne, info_from, info);
+        self.elements.flush(ne, info_from, info);
         out
     }
 }
