@@ -66,26 +66,6 @@ impl PackedBlocks {
         Ok(())
     }
 
-    /// Empty every block again (for the next assembly, without a new 55 KiB value).
-    pub fn clear(&mut self) {
-        for (i, k) in self.len.iter_mut().enumerate() {
-            if *k != 0 {
-                self.upper[i].fill(0.0);
-                self.rhs[i].fill(0.0);
-                *k = 0;
-            }
-        }
-    }
-
-    /// Block `block` as summed so far: its packed upper triangle (`k(k+1)/2` values, row `a`
-    /// being `A[a][a..k]`) and right-hand side (`k` values), `k` the width of its rows; `None`
-    /// for a block without rows. For a caller that maps the blocks through a linear map before
-    /// adding them to the system (rows `z′ᵀE` summed as `Eᵀ(Σ w z′z′ᵀ)E`).
-    pub fn block(&self, block: usize) -> Option<(&[f64], &[f64])> {
-        let k = usize::from(*self.len.get(block)?);
-        (k != 0).then(|| (&self.upper[block][..k * (k + 1) / 2], &self.rhs[block][..k]))
-    }
-
     /// Add every used block to `ne`, block `i` over the unknowns `cols(i)` (whose length must be
     /// the width of its rows).
     pub fn flush<'c>(
@@ -141,17 +121,5 @@ mod tests {
         assert!((direct.rhs() - blocked.rhs()).norm() < 1e-12);
         assert!(blocks.add_row(0, &[1.0], 0.0, 1.0).is_err());
         assert!(blocks.add_row(MAX_BLOCKS, &[1.0], 0.0, 1.0).is_err());
-        // The blocks as summed: block 1 holds rows 3 and 4 over its two unknowns.
-        let (up, b) = blocks.block(1).unwrap();
-        let (j3, j4) = ([3.0, 1.0], [-1.0, 2.0]);
-        assert_eq!(up.len(), 3);
-        assert!((up[0] - (j3[0] * j3[0] + 4.0 * j4[0] * j4[0])).abs() < 1e-12);
-        assert!((up[1] - (j3[0] * j3[1] + 4.0 * j4[0] * j4[1])).abs() < 1e-12);
-        assert!((b[1] - -(0.7 * j3[1] + 4.0 * 0.1 * j4[1])).abs() < 1e-12);
-        assert!(blocks.block(2).is_none() && blocks.block(MAX_BLOCKS).is_none());
-        blocks.clear();
-        assert!((0..MAX_BLOCKS).all(|i| blocks.block(i).is_none()));
-        blocks.add_row(0, &[2.0], 1.0, 1.0).unwrap();
-        assert_eq!(blocks.block(0), Some((&[4.0][..], &[-2.0][..])));
     }
 }
