@@ -204,3 +204,48 @@ fn m2d_rows_are_the_gauss_newton_linearization() {
         assert!(worst < 1e-5, "{mode:?}: relative gradient error {worst}");
     }
 }
+
+/// The context's seeded correspondence search (each point starts from its previous element)
+/// gives bit for bit the correspondences of an unseeded search, iteration after iteration
+/// of a moving pose, front-facing or plain, with noisy points off the surface too.
+#[test]
+fn seeded_correspondences_equal_a_fresh_search() {
+    use rand::{Rng, SeedableRng};
+    let t = default_right_hand();
+    let pose = test_pose(&t);
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(8);
+    let mut points = rendered_points(&t, &pose, 2000);
+    for p in points.iter_mut().step_by(3) {
+        *p += Vector3::new(
+            rng.random_range(-8.0..8.0),
+            rng.random_range(-8.0..8.0),
+            rng.random_range(-8.0..8.0),
+        );
+    }
+    let view = View::Perspective {
+        camera_center: Vector3::zeros(),
+    };
+    for front_facing in [true, false] {
+        let mut ctx = TrackingCtx::new(&t, view, IrlsParams::default()).unwrap();
+        ctx.set_front_facing(front_facing);
+        ctx.set_points(&points);
+        let mut moved = pose.clone();
+        for step in 0..6 {
+            for v in moved.values.iter_mut() {
+                *v += rng.random_range(-0.03..0.03);
+            }
+            ctx.update(&moved, step == 0).unwrap();
+            // The unseeded search on the context's own geometry (a freshly built one has
+            // another bounding tree, hence another silhouette direction under perspective).
+            let geometry = ctx.geometry();
+            let mut fresh = vec![None; points.len()];
+            if front_facing {
+                geometry.project_points_front_facing(&points, &view, &mut fresh);
+            } else {
+                geometry.project_points(&points, &mut fresh);
+            }
+            assert!(fresh.iter().all(Option::is_some));
+            assert_eq!(ctx.correspondences(), &fresh[..], "step {step}");
+        }
+    }
+}

@@ -29,6 +29,23 @@
 //! ≈ a quarter of the frame in `perf`), where the plain tracker sums its rows per element in
 //! packed blocks. The Laplace step now reads the system the solve's last evaluation assembled
 //! instead of assembling it again, bit for bit the same.
+//!
+//! Then (branch `speed8`): the seeded correspondence search (the context kept seeds but did not
+//! use them), the m2d render mask built once per frame (the per-pixel test took four integer
+//! divisions per footprint pixel and element), and the data rows over pose and β summed per
+//! element through 4 × 4 moment blocks (`ShapeRows`, module docs). Same machine, alternating
+//! runs of the binaries before and after, medians (µs):
+//!
+//! | median (µs)                     | before        | after         |
+//! |---------------------------------|---------------|---------------|
+//! | criterion, whole frame          | 12 200–12 600 | 7 100–8 000   |
+//! | `correspondences`               | 6 800–7 000   | 5 050–5 300   |
+//! | `solve` (terms, factorization)  | 4 800–5 100   | 1 600–1 700   |
+//! | criterion, plain sphere-mesh    | 8 400         | 7 050–7 650   |
+//!
+//! ≈ 130–140 frames/s: still short of 200. What remains is mostly the correspondence refresh
+//! (the branch-and-bound closest points ≈ 35 % of the frame in `perf`, the m2d footprints and
+//! ray casts ≈ 20 %) and the pose-only solve shared with the plain tracker.
 
 #[path = "../tests/common/mod.rs"]
 mod common;

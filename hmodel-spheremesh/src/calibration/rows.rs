@@ -6,6 +6,19 @@
 //! [`TrackingCtx`]) extended by the shape columns of the footpoint: for `q = Σ wᵢcᵢ + (Σ wᵢrᵢ)·n`,
 //! `∂q/∂x = Σ wᵢ(∂cᵢ/∂x + n ∂rᵢ/∂x)` ([`ShapeSpace::for_each_sphere_column`], exact; `w`, `n`
 //! held fixed as for the pose columns).
+//!
+//! # Accumulation per element
+//! Rows are not added one by one (a row carries 20–40 pose and shape columns, and `JᵀJ` costs
+//! their square per row). Every column of a footpoint row on element `e` is linear in the
+//! barycentric weights: `∂c_i/∂θ` and the shape columns `(∂cᵢ, ∂rᵢ)` depend on the sphere only,
+//! so the row is `j = z′ᵀE_e`, with `E_e` the `4m × K` matrix stacking per sphere `i` of the
+//! element (`m` of them) `[∂cᵢ/∂θ ∂cᵢ/∂β; 0 ∂rᵢ/∂β]` over the element's `K` columns, and
+//! `z′ = (wᵢ·[g; g·n])ᵢ` (`g` the row's direction: `u` for d2m, a row of `J_π` for m2d). The
+//! rows of an element then sum to `Eᵀ(Σ ω z′z′ᵀ)E`: each row adds `wₗwₗ′·ω zzᵀ` to the 4 × 4
+//! blocks of the sphere pairs it weights (a `4m × 4m` moment, `z = [g; g·n]`), and the product
+//! is formed once per element and evaluation ([`ShapeRows::add_frame`]; equal to the
+//! row-by-row sum up to rounding, tested). A row then costs at most 6 × 16 multiply-adds instead
+//! of `K(K+1)/2` scattered ones, and its pose columns are never formed.
 
 use hand_model::solver::NormalEquations;
 use hand_model::spheremesh::PosedSphereMesh;
@@ -111,6 +124,285 @@ pub struct ShapeRows {
     /// `columns[starts[s]..starts[s + 1]]`, rebuilt for every frame's posed model.
     columns: Vec<(usize, Vector3<f64>, f64)>,
     starts: Vec<usize>,
+    elements: ElementMaps,
+    /// Whether rows are summed per element (false: every row on its own, the reference the
+    /// tests compare with).
+    blocked: bool,
+}
+
+/// Most spheres of an element (a wedge).
+const MAX_SPHERES: usize = 3;
+/// Most entries of `z′` (module docs): `[g; g·n]` per sphere.
+const Z: usize = 4 * MAX_SPHERES;
+
+/// The rows of one element summed in `z′` space (module docs): `Σ ω z′z′ᵀ`, of which only the
+/// 4 × 4 blocks of sphere pairs `l ≤ l′` are kept, and `Σ ω r z′`.
+#[derive(Copy, Clone)]
+struct Moment {
+    m: [[f64; Z]; Z],
+    v: [f64; Z],
+    used: bool,
+}
+
+impl Moment {
+    const ZERO: Self = Self {
+        m: [[0.0; Z]; Z],
+        v: [0.0; Z],
+        used: false,
+    };
+
+    /// Add the row `z′ = (wₗ z)ₗ` (`wl[..m]`, `z = [g; g·n]`) with residual `r` and weight `ω`:
+    /// multiples of one `ω zzᵀ` on fixed-size blocks, 16 multiply-adds per sphere pair that the
+    /// row weights (at most 6), with no `z′` formed.
+    #[inline]
+    fn add(&mut self, wl: &[f64; MAX_SPHERES], m: usize, z: &[f64; 4], r: f64, w: f64) {
+        let mut zz = [[0.0; 4]; 4];
+        for (row, &za) in zz.iter_mut().zip(z) {
+            for (x, &zb) in row.iter_mut().zip(z) {
+                *x = w * za * zb;
+            }
+        }
+        let m = m.min(MAX_SPHERES);
+        for l in 0..m {
+            if wl[l] == 0.0 {
+                continue;
+            }
+            let wr = w * r * wl[l];
+            for (v, &zc) in self.v[4 * l..4 * l + 4].iter_mut().zip(z) {
+                *v += wr * zc;
+            }
+            for l2 in l..m {
+                let c = wl[l] * wl[l2];
+                if c == 0.0 {
+                    continue;
+                }
+                for (row, zzr) in self.m[4 * l..4 * l + 4].iter_mut().zip(&zz) {
+                    for (x, &y) in row[4 * l2..4 * l2 + 4].iter_mut().zip(zzr) {
+                        *x += c * y;
+                    }
+                }
+            }
+        }
+        self.used = true;
+    }
+
+    /// Entry `(a, b)` of the symmetric `Σ ω z′z′ᵀ` from the kept blocks.
+    #[inline]
+    fn entry(&self, a: usize, b: usize) -> f64 {
+        if a / 4 <= b / 4 {
+            self.m[a][b]
+        } else {
+            self.m[b][a]
+        }
+    }
+}
+
+/// The matrices `E_e` of the module docs, rebuilt for every evaluation (allocation-free once
+/// sized), and the scratch of their products.
+#[derive(Default)]
+struct ElementMaps {
+    /// Per element its spheres and their count; `None` where its rows go one by one (more than
+    /// three spheres, or a column outside the system).
+    spheres: Vec<Option<([u32; MAX_SPHERES], usize)>>,
+    /// Per element the sums of its rows.
+    moments: Vec<Moment>,
+    /// System indices of the columns of every element, element after element: element `e`
+    /// has `cols[col_start[e]..col_start[e + 1]]`, its pose DOFs first.
+    cols: Vec<usize>,
+    col_start: Vec<usize>,
+    /// `E_e` row-major (`4m` rows of `K` values) at `e_start[e]`.
+    e: Vec<f64>,
+    e_start: Vec<usize>,
+    /// Per system unknown, its slot in the element being mapped (`u32::MAX`: none yet).
+    slot_of: Vec<u32>,
+    /// Flush scratch: `M E_e`, the packed `K × K` block and its right-hand side.
+    me: Vec<f64>,
+    upper: Vec<f64>,
+    rhs: Vec<f64>,
+}
+
+impl ElementMaps {
+    /// The slot of system unknown `i` among the columns of the element whose columns start at
+    /// `start`, added when new; `None` when `i` is outside the system.
+    fn slot(&mut self, i: usize, start: usize) -> Option<usize> {
+        let s = self.slot_of.get_mut(i)?;
+        if *s == u32::MAX {
+            *s = (self.cols.len() - start) as u32;
+            self.cols.push(i);
+        }
+        Some(*s as usize)
+    }
+
+    /// Map every element of `ctx`'s posed template for a system of `dim` unknowns, its pose
+    /// at `theta`, with the shape columns of [`ShapeRows`].
+    fn build(
+        &mut self,
+        ctx: &TrackingCtx<'_>,
+        columns: &[(usize, Vector3<f64>, f64)],
+        starts: &[usize],
+        theta: usize,
+        dim: usize,
+    ) {
+        let t = ctx.template();
+        let (posed, jacobian) = (ctx.posed_mesh(), ctx.jacobian());
+        self.spheres.clear();
+        self.moments.clear();
+        self.moments.resize(t.elements.len(), Moment::ZERO);
+        self.cols.clear();
+        self.col_start.clear();
+        self.e.clear();
+        self.e_start.clear();
+        self.slot_of.clear();
+        self.slot_of.resize(dim, u32::MAX);
+        let mut g = [Vector3::zeros(); MAX_ELEMENT_DOFS];
+        for (el, def) in t.elements.iter().enumerate() {
+            let start = self.cols.len();
+            self.col_start.push(start);
+            self.e_start.push(self.e.len());
+            let ids = def.element.spheres();
+            let dofs = jacobian.dofs(el);
+            // Pose DOFs first: slot j is the j-th DOF (distinct, sorted), as `columns` writes.
+            let mut ok = ids.len() <= MAX_SPHERES;
+            for (j, &d) in dofs.iter().enumerate() {
+                ok &= self.slot(theta + d, start) == Some(j);
+            }
+            for &s in ids {
+                let range = starts.get(s as usize..s as usize + 2);
+                ok &= range.is_some();
+                for &(i, _, _) in range.map_or(&[][..], |r| &columns[r[0]..r[1]]) {
+                    ok &= self.slot(i, start).is_some();
+                }
+            }
+            let k = self.cols.len() - start;
+            if ok {
+                let e0 = self.e.len();
+                self.e.resize(e0 + 4 * ids.len() * k, 0.0);
+                for (l, &s) in ids.iter().enumerate() {
+                    let rows = &mut self.e[e0 + 4 * l * k..e0 + 4 * (l + 1) * k];
+                    // ∂cₛ/∂θ: the footpoint columns of the sphere center alone.
+                    let n = jacobian
+                        .columns(posed, el, &[s; 3], &[1.0, 0.0, 0.0], &mut g)
+                        .len();
+                    for (j, col) in g[..n].iter().enumerate() {
+                        for c in 0..3 {
+                            rows[c * k + j] = col[c];
+                        }
+                    }
+                    let s = s as usize;
+                    for &(i, dc, dr) in &columns[starts[s]..starts[s + 1]] {
+                        let slot = self.slot_of[i] as usize;
+                        for c in 0..3 {
+                            rows[c * k + slot] += dc[c];
+                        }
+                        rows[3 * k + slot] += dr;
+                    }
+                }
+                let mut spheres = [0; MAX_SPHERES];
+                spheres[..ids.len()].copy_from_slice(ids);
+                self.spheres.push(Some((spheres, ids.len())));
+            } else {
+                self.spheres.push(None);
+            }
+            for &i in &self.cols[start..] {
+                self.slot_of[i] = u32::MAX;
+            }
+            if !ok {
+                self.cols.truncate(start);
+            }
+        }
+        self.col_start.push(self.cols.len());
+    }
+
+    /// Add a row with direction `z = [g; g·n]`, residual `r` and weight `w` at the footpoint
+    /// `spheres`, `weights` on element `el` to the element's moment; false when the element has
+    /// no map or a weighted sphere is not the element's (that row goes on its own).
+    #[inline]
+    fn add(
+        &mut self,
+        el: usize,
+        (spheres, weights): (&[u32; 3], &[f64; 3]),
+        z: &[f64; 4],
+        r: f64,
+        w: f64,
+    ) -> bool {
+        let (Some(&Some((ids, m))), Some(moment)) =
+            (self.spheres.get(el), self.moments.get_mut(el))
+        else {
+            return false;
+        };
+        let mut wl = [0.0; MAX_SPHERES];
+        for (&s, &x) in spheres.iter().zip(weights) {
+            if x != 0.0 {
+                let Some(l) = ids[..m].iter().position(|&i| i == s) else {
+                    return false;
+                };
+                wl[l] += x;
+            }
+        }
+        moment.add(&wl, m, z, r, w);
+        true
+    }
+
+    /// Add `Eᵀ M E` and `Eᵀ v` of every element's moments to `ne` (and the diagonal to
+    /// `info[k − from]` for unknowns `k ≥ from`).
+    fn flush(&mut self, ne: &mut NormalEquations, from: usize, info: &mut [f64]) {
+        for el in 0..self.spheres.len() {
+            let (Some((_, m)), mom) = (self.spheres[el], &self.moments[el]) else {
+                continue;
+            };
+            if !mom.used {
+                continue;
+            }
+            let d = 4 * m;
+            let cols = &self.cols[self.col_start[el]..self.col_start[el + 1]];
+            let k = cols.len();
+            let e = &self.e[self.e_start[el]..self.e_start[el] + d * k];
+            // M E.
+            self.me.clear();
+            self.me.resize(d * k, 0.0);
+            for a in 0..d {
+                for b in 0..d {
+                    let x = mom.entry(a, b);
+                    if x != 0.0 {
+                        add_scaled(&mut self.me[a * k..(a + 1) * k], x, &e[b * k..(b + 1) * k]);
+                    }
+                }
+            }
+            // Eᵀ (M E), upper triangle packed row by row, and b = −Eᵀ v.
+            self.upper.clear();
+            self.upper.resize(k * (k + 1) / 2, 0.0);
+            self.rhs.clear();
+            self.rhs.resize(k, 0.0);
+            for (i, &vi) in mom.v[..d].iter().enumerate() {
+                let (er, mr) = (&e[i * k..(i + 1) * k], &self.me[i * k..(i + 1) * k]);
+                let mut off = 0;
+                for (p, &x) in er.iter().enumerate() {
+                    if x != 0.0 {
+                        add_scaled(&mut self.upper[off..off + k - p], x, &mr[p..]);
+                        self.rhs[p] -= x * vi;
+                    }
+                    off += k - p;
+                }
+            }
+            // The columns were checked against the system's size when mapped.
+            let _ = ne.add_packed_block(cols, &self.upper, &self.rhs);
+            let mut off = 0;
+            for (p, &c) in cols.iter().enumerate() {
+                if let Some(x) = c.checked_sub(from).and_then(|i| info.get_mut(i)) {
+                    *x += self.upper[off];
+                }
+                off += k - p;
+            }
+        }
+    }
+}
+
+/// `y += a x`.
+#[inline]
+fn add_scaled(y: &mut [f64], a: f64, x: &[f64]) {
+    for (y, &x) in y.iter_mut().zip(x) {
+        *y += a * x;
+    }
 }
 
 impl ShapeRows {
@@ -120,6 +412,8 @@ impl ShapeRows {
             row: Row::new(n),
             columns: Vec::new(),
             starts: Vec::new(),
+            elements: ElementMaps::default(),
+            blocked: true,
         }
     }
 
@@ -157,12 +451,42 @@ impl ShapeRows {
         }
     }
 
+    /// One footpoint row `r`, weight `w`, direction `[g; gn]` at the footpoint `(element,
+    /// spheres, weights)`: into its element's moment, or on its own (`Σ w j²` of the unknowns
+    /// `k ≥ from` into `info[k − from]`) where the element has none. Returns `w r²`.
+    #[allow(clippy::too_many_arguments)]
+    fn add_footpoint(
+        &mut self,
+        ctx: &TrackingCtx<'_>,
+        at: (u32, &[u32; 3], &[f64; 3]),
+        g: &Vector3<f64>,
+        gn: f64,
+        r: f64,
+        w: f64,
+        (theta, ne, from, info): (usize, &mut NormalEquations, usize, &mut [f64]),
+    ) -> f64 {
+        let (el, spheres, weights) = (at.0 as usize, at.1, at.2);
+        let z = [g.x, g.y, g.z, gn];
+        if self.blocked && self.elements.add(el, (spheres, weights), &z, r, w) {
+            return w * r * r;
+        }
+        let mut cols = [Vector3::zeros(); MAX_ELEMENT_DOFS];
+        let dofs = ctx
+            .jacobian()
+            .columns(ctx.posed_mesh(), el, spheres, weights, &mut cols);
+        for (&d, col) in dofs.iter().zip(&cols) {
+            self.row.add(theta + d, g.dot(col));
+        }
+        self.add_shape(spheres, weights, g, gn);
+        self.row.flush_data(ne, r, w, from, info)
+    }
+
     /// Add the d2m rows (Eq. 3.11 / Eq. 3.4: `r = −‖p − q‖`, row `uᵀ∂q/∂x`, IRLS weight) and the
     /// m2d rows (Eq. 3.12 / Eq. 3.5: two pixel rows `J_π ∂x/∂x` per push) of the frame held by
     /// `ctx` (already updated at the frame's pose) to `ne`, over the pose DOFs at
     /// `layout.pose` and the shape unknowns mapped by `layout.shape`. The data information
     /// `Σ w j²` of each system unknown `k ≥ info_from` is added to `info[k − info_from]` (an empty
-    /// slice skips it).
+    /// slice skips it). The rows are summed per element (module docs).
     #[allow(clippy::too_many_arguments)]
     pub fn add_frame(
         &mut self,
@@ -175,21 +499,15 @@ impl ShapeRows {
         info_from: usize,
     ) -> DataEnergy {
         self.cache_columns(ctx, space, layout);
-        let posed = ctx.posed_mesh();
-        let jacobian = ctx.jacobian();
-        let irls = ctx.irls();
         let theta = layout.pose;
-        let mut cols = [Vector3::zeros(); MAX_ELEMENT_DOFS];
+        self.elements
+            .build(ctx, &self.columns, &self.starts, theta, ne.dim());
+        let irls = ctx.irls();
         let mut out = DataEnergy::default();
         for (c, u, r, wr) in ctx.d2m_rows() {
-            let dofs =
-                jacobian.columns(posed, c.element as usize, &c.spheres, &c.weights, &mut cols);
-            for (&d, col) in dofs.iter().zip(&cols) {
-                self.row.add(theta + d, u.dot(col));
-            }
-            self.add_shape(&c.spheres, &c.weights, u, u.dot(&c.normal));
-            self.row
-                .flush_data(ne, r, weights.d2m * wr, info_from, info);
+            let at = (c.element, &c.spheres, &c.weights);
+            let sink = (theta, &mut *ne, info_from, &mut *info);
+            self.add_footpoint(ctx, at, u, u.dot(&c.normal), r, weights.d2m * wr, sink);
             // The energy the steps are judged by: the Huber norm itself (its IRLS quadratic has
             // the same value and gradient at the linearization point).
             out.d2m += weights.d2m
@@ -202,29 +520,22 @@ impl ShapeRows {
         }
         if let Some(camera) = ctx.sensor().camera.as_ref() {
             let w = weights.m2d * ctx.m2d_pixel_weight();
+            let posed = ctx.posed_mesh();
             for push in ctx.pushes() {
                 let x = &push.point;
                 let res = camera.project(x) - push.target;
                 let jp = camera.projection_jacobian(x);
-                let dofs = jacobian.columns(
-                    posed,
-                    push.element as usize,
-                    &push.spheres,
-                    &push.weights,
-                    &mut cols,
-                );
                 let normal = posed_normal(posed, push);
                 for axis in 0..2 {
                     let g = jp.row(axis).transpose();
-                    for (&d, col) in dofs.iter().zip(&cols) {
-                        self.row.add(theta + d, g.dot(col));
-                    }
-                    self.add_shape(&push.spheres, &push.weights, &g, g.dot(&normal));
-                    out.m2d += self.row.flush_data(ne, res[axis], w, info_from, info);
+                    let at = (push.element, &push.spheres, &push.weights);
+                    let sink = (theta, &mut *ne, info_from, &mut *info);
+                    out.m2d += self.add_footpoint(ctx, at, &g, g.dot(&normal), res[axis], w, sink);
                     out.rows += 1;
                 }
             }
         }
+        self.elements.flush(ne, info_from, info);
         out
     }
 }
@@ -241,5 +552,94 @@ fn posed_normal(posed: &PosedSphereMesh, push: &SilhouettePush) -> Vector3<f64> 
         d / d.norm()
     } else {
         Vector3::zeros()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::synthetic::rendered_frame;
+    use crate::M2dMode;
+    use hand_model::kinematics::Pose;
+    use hand_model::query::View;
+    use hand_model::solver::IrlsParams;
+    use hand_model::spheremesh::default_right_hand;
+    use sensor_io::Camera;
+
+    /// The rows summed per element through their moments equal the rows added one by one (the
+    /// assembly before the moments) to 1e-10 of the largest entry: pose and shape blocks, right
+    /// side, information and energies, for both m2d modes, a frame index offset and held shape
+    /// unknowns, with front-facing substitutes and IRLS weights.
+    #[test]
+    fn element_moments_equal_row_by_row_assembly() {
+        let base = default_right_hand();
+        let sk = &base.skeleton;
+        let space = ShapeSpace::new(&base, true).unwrap();
+        let truth = Pose::from_named(
+            sk,
+            [
+                ("global_tz", 400.0),
+                ("global_ry", 0.4),
+                ("index_mcp_flex", 0.5),
+                ("middle_pip_flex", 0.7),
+                ("thumb_mcp_flex", 0.3),
+            ],
+        )
+        .unwrap();
+        let frame = rendered_frame(&base, &truth, &Camera::sr300_qvga(), 2500).unwrap();
+        let mut pose = truth.clone();
+        pose.values[sk.dof_index("global_tx").unwrap()] += 15.0;
+        pose.values[sk.dof_index("ring_mcp_abd").unwrap()] += 0.2;
+        let theta = 7;
+        let so = theta + sk.num_dofs() + 3;
+        let n = so + space.len();
+        for (mode, held) in [(M2dMode::Render, 0), (M2dMode::Centers, 3)] {
+            let view = View::Perspective {
+                camera_center: Vector3::zeros(),
+            };
+            let mut ctx = TrackingCtx::new(&base, view, IrlsParams::default()).unwrap();
+            ctx.set_frame(&frame);
+            ctx.set_m2d(Some(mode));
+            ctx.update(&pose, false).unwrap();
+            let pushes = ctx.pushes().len();
+            assert!(pushes > 2 && ctx.reweighted(), "{mode:?}: {pushes} pushes");
+            // Every `held`-th shape unknown dropped (`None`), as the online layout drops some.
+            let shape: Vec<Option<usize>> = (0..space.len())
+                .map(|i| (held == 0 || i % held != 0).then_some(so + i))
+                .collect();
+            let layout = RowLayout {
+                pose: theta,
+                shape: &shape,
+            };
+            let weights = DataWeights { d2m: 1.0, m2d: 0.5 };
+            let run = |blocked: bool| {
+                let mut rows = ShapeRows::new(n);
+                rows.blocked = blocked;
+                let mut ne = NormalEquations::new(n);
+                let mut info = vec![0.0; space.len()];
+                let e = rows.add_frame(&ctx, &space, &layout, &weights, &mut ne, &mut info, so);
+                ne.symmetrize();
+                // Every element of the hand is mapped (none left to the row-by-row path).
+                let mapped = rows.elements.spheres.iter().flatten().count();
+                assert_eq!(mapped, base.elements.len());
+                (ne, info, e)
+            };
+            let (blocked, info, e) = run(true);
+            let (reference, info_ref, e_ref) = run(false);
+            let scale = reference.lhs().amax();
+            let a = (blocked.lhs() - reference.lhs()).amax() / scale;
+            let b = (blocked.rhs() - reference.rhs()).amax() / reference.rhs().amax();
+            let i = info
+                .iter()
+                .zip(&info_ref)
+                .map(|(x, y)| (x - y).abs())
+                .fold(0.0, f64::max)
+                / info_ref.iter().copied().fold(0.0, f64::max);
+            assert!(a < 1e-10 && b < 1e-10 && i < 1e-10, "{mode:?}: {a} {b} {i}");
+            assert!(info_ref.iter().filter(|&&x| x > 0.0).count() > 20);
+            assert_eq!(e.rows, e_ref.rows);
+            assert!((e.d2m - e_ref.d2m).abs() <= 1e-12 * e_ref.d2m);
+            assert!((e.m2d - e_ref.m2d).abs() <= 1e-10 * e_ref.m2d && e.m2d > 0.0);
+        }
     }
 }
