@@ -19,11 +19,13 @@
 //! `cargo test --release -p eval --test ch4_acceptance -- --ignored --nocapture full_size`, and
 //! the same under the ToF sensor model `… -- --ignored --nocapture fig_4_7_tof`.
 //!
-//! Status (full-size run, see the issue-8 note for the tables): the IEKF target holds at
-//! σ = 0.1 and 0.2 but not at σ ≥ 0.3 on the mean of 15 draws (draws whose neighbouring
-//! phalanges are perturbed in opposite directions by ~2σ land in a local minimum with the
-//! joint between them misplaced); the split KF reaches lower E_β than the IEKF on these
-//! noise-free sequences; under ToF noise E_β ends above 1 mm even at σ = 0.1 (the radii come
+//! Status (full-size run, see the issue-8 note for the tables): with the shape-space prior at
+//! honline's ω = 5 (was 10; `OnlineConfig::shape_prior` has the sweep) the IEKF's mean E_β
+//! over 15 draws is 0.37 / 0.54 / 0.91 / 1.13 mm at σ = 0.1 / 0.2 / 0.3 / 0.4 (targets ≤ 1.0 /
+//! ≤ 1.5 met; at ω = 10: 0.36 / 0.65 / 1.16 / 1.50); one draw at σ = 0.3 (seed 11) does not
+//! halve its E_β (3.22 → 1.77 mm: the middle finger's PIP/DIP joint lands misplaced, middle
+//! phalanx +12.7 mm, distal −8.1 mm), so "every draw converging" holds at σ ≤ 0.2 and 0.4 but
+//! not at 0.3 (14/15). Under ToF noise E_β ends above 1 mm even at σ = 0.1 (the radii come
 //! out thin); tracking with the online estimate does not come within 10 % of tracking with
 //! the true template (the CI tests guard the levels reached instead).
 
@@ -263,13 +265,20 @@ fn uncooperative_user_keeps_unobservable_lengths_uncertain() {
         .filter(|&i| basis().params[i].name.ends_with("_length"))
         .collect();
     let e = |k: usize| honline_calib::beta_error(&r.frames[k].beta, &r.truth, &lengths);
+    let template = honline_calib::beta_error(&r.template, &r.truth, &lengths);
     println!(
-        "phalanx lengths: E_β template {:.3}, end of straight phase {:.3}, end {:.3} mm",
-        honline_calib::beta_error(&r.template, &r.truth, &lengths),
+        "phalanx lengths: E_β template {template:.3}, end of straight phase {:.3}, end {:.3} mm",
         e(before),
         e(end)
     );
-    assert!(e(end) < 0.6 * e(before), "{} → {}", e(before), e(end));
+    // Measured against the template too: the straight phase already learns part of the
+    // lengths (their sums), the more so the weaker the shape-space prior.
+    assert!(
+        e(end) < e(before) && e(end) < 0.4 * template,
+        "{} → {}",
+        e(before),
+        e(end)
+    );
 }
 
 #[test]
