@@ -23,7 +23,7 @@ use std::path::Path;
 use hand_model::query::SphereMeshGeometry;
 use hand_model::shape::{Element, Sphere};
 use hand_model::spheremesh::SphereMeshTemplate;
-use nalgebra::{Matrix3, Matrix4, SymmetricEigen, Vector3, Vector4};
+use nalgebra::{Matrix3, Matrix4, Vector3, Vector4};
 use serde::de::DeserializeOwned;
 use serde_json::Value;
 
@@ -717,17 +717,9 @@ fn principal_axes(points: &[Vector3<f64>], name: &'static str) -> Result<Matrix3
     if points.iter().any(|p| !p.iter().all(|x| x.is_finite())) {
         return Err(DatasetError::arg(name, "non-finite coordinate"));
     }
-    let (mean, _) = mean_and_rms_spread(points);
-    let cov = points
-        .iter()
-        .map(|p| (p - mean) * (p - mean).transpose())
-        .sum::<Matrix3<f64>>();
-    let eig = SymmetricEigen::new(cov);
-    let mut order = [0, 1, 2];
-    order.sort_by(|&a, &b| eig.eigenvalues[b].total_cmp(&eig.eigenvalues[a]));
-    Ok(Matrix3::from_columns(
-        &order.map(|i| eig.eigenvectors.column(i).into_owned()),
-    ))
+    hand_model::math::principal_axes(points)
+        .map(|(_, axes)| axes)
+        .ok_or_else(|| DatasetError::arg(name, "no principal axes"))
 }
 
 fn extents_along(

@@ -234,6 +234,26 @@ pub fn fit_similarity(a: &[Vector3<f64>], b: &[Vector3<f64>]) -> Result<Similari
     umeyama(a, b, true)
 }
 
+/// Centroid and principal axes of a point set: the eigenvectors of its covariance as columns,
+/// largest spread first (signs arbitrary). `None` for fewer than 3 points.
+pub fn principal_axes(points: &[Vector3<f64>]) -> Option<(Vector3<f64>, Matrix3<f64>)> {
+    if points.len() < 3 {
+        return None;
+    }
+    let n = points.len() as f64;
+    let c = points.iter().sum::<Vector3<f64>>() / n;
+    let cov = points
+        .iter()
+        .map(|p| (p - c) * (p - c).transpose())
+        .sum::<Matrix3<f64>>()
+        / n;
+    let eig = nalgebra::SymmetricEigen::new(cov);
+    let mut order = [0usize, 1, 2];
+    order.sort_by(|&a, &b| eig.eigenvalues[b].total_cmp(&eig.eigenvalues[a]));
+    let axes = Matrix3::from_columns(&order.map(|i| eig.eigenvectors.column(i).into_owned()));
+    Some((c, axes))
+}
+
 /// [`fit_similarity`] with the scale held at 1: the least-squares rigid motion (Kabsch with
 /// Umeyama's reflection correction), for point sets already in the same unit.
 pub fn fit_rigid(a: &[Vector3<f64>], b: &[Vector3<f64>]) -> Result<Rigid3, AlignError> {
@@ -313,6 +333,31 @@ mod tests {
     use super::*;
     use rand::{Rng, SeedableRng};
     use rand_chacha::ChaCha8Rng;
+
+    #[test]
+    fn principal_axes_follow_the_spread() {
+        // A box of points 40 × 10 × 2 along three orthogonal directions, turned and moved.
+        let r = Rotation3::from_euler_angles(0.3, -0.7, 1.1).into_inner();
+        let c = Vector3::new(5.0, -2.0, 30.0);
+        let mut rng = ChaCha8Rng::seed_from_u64(3);
+        let points: Vec<Vector3<f64>> = (0..500)
+            .map(|_| {
+                let local = Vector3::new(
+                    rng.random_range(-20.0..20.0),
+                    rng.random_range(-5.0..5.0),
+                    rng.random_range(-1.0..1.0),
+                );
+                c + r * local
+            })
+            .collect();
+        let (centroid, axes) = principal_axes(&points).unwrap();
+        assert!((centroid - c).norm() < 1.0);
+        for k in 0..3 {
+            let cos = axes.column(k).dot(&r.column(k)).abs();
+            assert!(cos > 0.99, "axis {k}: |cos| {cos}");
+        }
+        assert!(principal_axes(&points[..2]).is_none());
+    }
 
     fn random_points(rng: &mut ChaCha8Rng, n: usize) -> Vec<Vector3<f64>> {
         (0..n)

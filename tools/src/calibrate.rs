@@ -20,8 +20,8 @@ use hand_model::render::preview::{write_preview_png, PreviewOptions};
 use hand_model::solver::PcaPrior;
 use hand_model::spheremesh::{PosedSphereMesh, ShapeBasis, SphereMeshTemplate};
 use hmodel_spheremesh::calibration::{
-    calibrate, calibrate_clouds, principal_frame, select_frames, split_forearm, Calibration,
-    CalibrationConfig, CalibrationFrame, CloudSearch, IterationRecord,
+    calibrate, calibrate_clouds, select_frames, split_forearm, Calibration, CalibrationConfig,
+    CalibrationFrame, CloudSearch, IterationRecord,
 };
 use hmodel_spheremesh::{Tracker, TrackerConfig};
 use honline_calib::{
@@ -521,7 +521,7 @@ const VIEW: u32 = 320;
 /// colored by its distance to the model ([`overlay::distance_color`]; magenta without one).
 fn cloud_views(points: &[Vector3<f64>], distances: &[Option<f64>]) -> RgbImage {
     let mut image = RgbImage::new(3 * VIEW, VIEW);
-    let Some((c, axes, _)) = principal_frame(points) else {
+    let Some((c, axes)) = hand_model::math::principal_axes(points) else {
         return image;
     };
     let local: Vec<Vector3<f64>> = points.iter().map(|p| axes.transpose() * (p - c)).collect();

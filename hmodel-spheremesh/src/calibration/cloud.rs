@@ -23,9 +23,9 @@
 //! the calibration.
 
 use hand_model::kinematics::Pose;
-use hand_model::math::matrix_to_euler_xyz;
+use hand_model::math::{matrix_to_euler_xyz, principal_axes};
 use hand_model::spheremesh::{PosedSphereMesh, SphereMeshTemplate};
-use nalgebra::{Matrix3, SymmetricEigen, Vector3};
+use nalgebra::{Matrix3, Vector3};
 
 use super::solve::{calibrate, Calibration, CalibrationConfig, CalibrationError, CalibrationFrame};
 
@@ -106,29 +106,6 @@ pub struct CloudInit {
     pub energies: [f64; 2],
 }
 
-/// Centroid and principal axes (columns, largest spread first) of a point set, with the
-/// standard deviation along each axis; `None` for fewer than 3 points.
-pub fn principal_frame(
-    points: &[Vector3<f64>],
-) -> Option<(Vector3<f64>, Matrix3<f64>, Vector3<f64>)> {
-    if points.len() < 3 {
-        return None;
-    }
-    let n = points.len() as f64;
-    let c = points.iter().sum::<Vector3<f64>>() / n;
-    let cov = points
-        .iter()
-        .map(|p| (p - c) * (p - c).transpose())
-        .sum::<Matrix3<f64>>()
-        / n;
-    let eig = SymmetricEigen::new(cov);
-    let mut order = [0usize, 1, 2];
-    order.sort_by(|&a, &b| eig.eigenvalues[b].total_cmp(&eig.eigenvalues[a]));
-    let axes = Matrix3::from_columns(&order.map(|i| eig.eigenvectors.column(i).into_owned()));
-    let spread = Vector3::from(order.map(|i| eig.eigenvalues[i].max(0.0).sqrt()));
-    Some((c, axes, spread))
-}
-
 /// Set the six global DOFs of `pose` so that the model is turned by `r` (model → data frame)
 /// and the centroid of the template's *rest* sphere centers lands on `target`; the
 /// articulation of `pose` is kept.
@@ -204,7 +181,7 @@ const PROFILE_BINS: usize = 48;
 /// template's wrist segment reaches 46 mm below the crease, about 0.2 of a hand's length) are
 /// removed. A scan without a forearm loses at most a stretch of its wrist.
 pub fn split_forearm(points: &[Vector3<f64>]) -> Option<ForearmSplit> {
-    let (c, axes, _) = principal_frame(points)?;
+    let (c, axes) = principal_axes(points)?;
     let a0: Vector3<f64> = axes.column(0).into_owned();
     let t: Vec<f64> = points.iter().map(|p| (p - c).dot(&a0)).collect();
     let (lo, hi) = t
@@ -297,7 +274,7 @@ pub fn initialize_cloud_pose(
         .ok_or_else(|| CalibrationError::Input("a scan has fewer than 3 distinct points".into()))?;
     let coarse = CalibrationFrame::cloud(subsample(&split.hand, search.sample / 2));
     let fine = CalibrationFrame::cloud(subsample(&split.hand, search.sample));
-    let Some((c, axes, _)) = principal_frame(&fine.points) else {
+    let Some((c, axes)) = principal_axes(&fine.points) else {
         return Err(CalibrationError::Input(
             "a scan has fewer than 3 points".into(),
         ));

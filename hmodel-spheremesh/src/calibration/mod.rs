@@ -14,9 +14,8 @@ mod solve;
 
 pub use block::{BlockArrow, Unknown};
 pub use cloud::{
-    calibrate_clouds, initialize_cloud_pose, initialize_clouds, place_pose, principal_frame,
-    refine_digits, split_forearm, CloudCalibration, CloudInit, CloudPose, CloudSearch,
-    ForearmSplit,
+    calibrate_clouds, initialize_cloud_pose, initialize_clouds, place_pose, refine_digits,
+    split_forearm, CloudCalibration, CloudInit, CloudPose, CloudSearch, ForearmSplit,
 };
 pub use rows::{DataEnergy, DataWeights, RowLayout, ShapeRows};
 pub use select::select_frames;
