@@ -23,11 +23,28 @@ const SLACK_PX: f64 = 0.5;
 
 /// The conservative screen footprint of one element: the hull of discs of one radius.
 #[derive(Copy, Clone, Debug, PartialEq)]
+#[expect(
+    clippy::large_enum_variant,
+    reason = "one footprint at a time lives on the stack of the renderer's element loop"
+)]
 pub(crate) enum Footprint {
-    /// Centers (pixels) of the element's spheres, the count used, and the common radius.
-    Discs([Vector2<f64>; 3], usize, f64),
+    /// Centers (pixels) of the element's spheres, the count used, the common radius, and the
+    /// strips between pairs of centers (`None`: coincident centers, which the discs cover).
+    Discs([Vector2<f64>; 3], usize, f64, [Option<Strip>; 3]),
     /// The element may be seen at any pixel.
     Everywhere,
+}
+
+/// The rectangle swept by a segment `ab` moved ±r along its normal, with its frame computed
+/// once per element instead of once per pixel row ([`Footprint::span`] runs for every row).
+#[derive(Copy, Clone, Debug, PartialEq)]
+pub(crate) struct Strip {
+    a: Vector2<f64>,
+    /// Unit direction of `ab`.
+    t: Vector2<f64>,
+    /// Unit normal of `ab`.
+    n: Vector2<f64>,
+    len: f64,
 }
 
 /// Radius (in normalized image units) of a disc around `π(c)` holding the image of the sphere,
@@ -71,7 +88,12 @@ impl Footprint {
         if !radius.is_finite() || centers.iter().any(|c| !c.iter().all(|x| x.is_finite())) {
             return Self::Everywhere;
         }
-        Self::Discs(centers, spheres.len().min(3), radius)
+        let n = spheres.len().min(3);
+        let mut strips = [None; 3];
+        for (strip, (i, j)) in strips.iter_mut().zip(PAIRS.iter().filter(|&&(_, j)| j < n)) {
+            *strip = Strip::new(&centers[*i], &centers[*j]);
+        }
+        Self::Discs(centers, n, radius, strips)
     }
 
     /// The rows `[v0, v1]` (inclusive, clipped to `height`) the footprint may touch; `None` when
@@ -80,7 +102,7 @@ impl Footprint {
         let last = f64::from(height) - 1.0;
         let (lo, hi) = match self {
             Self::Everywhere => (0.0, last),
-            Self::Discs(c, n, r) => {
+            Self::Discs(c, n, r, _) => {
                 let ys = c[..*n].iter().map(|p| p.y);
                 let lo = ys.clone().fold(f64::INFINITY, f64::min) - r;
                 let hi = ys.fold(f64::NEG_INFINITY, f64::max) + r;
@@ -95,7 +117,7 @@ impl Footprint {
         let last = f64::from(width) - 1.0;
         let (lo, hi) = match self {
             Self::Everywhere => (0.0, last),
-            Self::Discs(c, n, r) => {
+            Self::Discs(c, n, r, strips) => {
                 let y = f64::from(v);
                 let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
                 let mut add = |iv: Option<(f64, f64)>| {
@@ -104,11 +126,11 @@ impl Footprint {
                         hi = hi.max(b);
                     }
                 };
-                for i in 0..*n {
-                    add(disc_row(&c[i], *r, y));
-                    for j in i + 1..*n {
-                        add(strip_row(&c[i], &c[j], *r, y));
-                    }
+                for center in &c[..*n] {
+                    add(disc_row(center, *r, y));
+                }
+                for strip in strips.iter().flatten() {
+                    add(strip.row(*r, y));
                 }
                 (lo.ceil().max(0.0), hi.floor().min(last))
             }
@@ -127,32 +149,47 @@ fn disc_row(c: &Vector2<f64>, r: f64, y: f64) -> Option<(f64, f64)> {
     })
 }
 
-/// `{u : (u, y) in the rectangle swept by the segment ab moved ±r along its normal}`.
-fn strip_row(a: &Vector2<f64>, b: &Vector2<f64>, r: f64, y: f64) -> Option<(f64, f64)> {
-    let e = b - a;
-    let len = e.norm();
-    if len <= 1e-12 {
-        return None; // the discs cover it
-    }
-    let t = e / len;
-    let n = Vector2::new(-t.y, t.x);
-    let (mut lo, mut hi) = (f64::NEG_INFINITY, f64::INFINITY);
-    // k·(u − a.x) + m ∈ [min, max] for (k, m) = (t.x, t.y (y − a.y)) and (n.x, n.y (y − a.y)).
-    for (k, m, min, max) in [
-        (t.x, t.y * (y - a.y), 0.0, len),
-        (n.x, n.y * (y - a.y), -r, r),
-    ] {
-        if k.abs() <= 1e-12 {
-            if m < min || m > max {
-                return None;
-            }
-            continue;
+/// The pairs of centers joined by strips (the first one only for two centers).
+const PAIRS: [(usize, usize); 3] = [(0, 1), (0, 2), (1, 2)];
+
+impl Strip {
+    /// The strip of segment `ab`; `None` when `a` and `b` coincide (the discs cover it).
+    fn new(a: &Vector2<f64>, b: &Vector2<f64>) -> Option<Self> {
+        let e = b - a;
+        let len = e.norm();
+        if len <= 1e-12 {
+            return None;
         }
-        let (p, q) = ((min - m) / k + a.x, (max - m) / k + a.x);
-        lo = lo.max(p.min(q));
-        hi = hi.min(p.max(q));
+        let t = e / len;
+        Some(Self {
+            a: *a,
+            t,
+            n: Vector2::new(-t.y, t.x),
+            len,
+        })
     }
-    (lo <= hi).then_some((lo, hi))
+
+    /// `{u : (u, y) in the rectangle swept by the segment moved ±r along its normal}`.
+    fn row(&self, r: f64, y: f64) -> Option<(f64, f64)> {
+        let (a, t, n) = (&self.a, &self.t, &self.n);
+        let (mut lo, mut hi) = (f64::NEG_INFINITY, f64::INFINITY);
+        // k·(u − a.x) + m ∈ [min, max] for (k, m) = (t.x, t.y (y − a.y)) and (n.x, n.y (y − a.y)).
+        for (k, m, min, max) in [
+            (t.x, t.y * (y - a.y), 0.0, self.len),
+            (n.x, n.y * (y - a.y), -r, r),
+        ] {
+            if k.abs() <= 1e-12 {
+                if m < min || m > max {
+                    return None;
+                }
+                continue;
+            }
+            let (p, q) = ((min - m) / k + a.x, (max - m) / k + a.x);
+            lo = lo.max(p.min(q));
+            hi = hi.min(p.max(q));
+        }
+        (lo <= hi).then_some((lo, hi))
+    }
 }
 
 #[cfg(test)]
