@@ -1,5 +1,6 @@
 //! The per-iteration queries allocate nothing: `update`, `project_points` and
-//! `project_points_front_facing` (seeded or not) run under a counting global allocator.
+//! `project_points_front_facing` (seeded, coherent or neither) run under a counting global
+//! allocator.
 // Implementing `GlobalAlloc` needs `unsafe`; it only forwards to the system allocator.
 #![allow(unsafe_code)]
 
@@ -50,6 +51,9 @@ fn per_iteration_queries_do_not_allocate() {
         .collect();
     let mut out = vec![None; points.len()];
     let mut seeds = vec![hand_model::query::NO_SEED; points.len()];
+    // A coherent state sized by a first call (the only one that allocates).
+    let mut coherence = hand_model::query::Coherence::default();
+    g.project_points_coherent(&points, &mut coherence, &mut out);
     let views = [
         View::Orthographic(Vector3::z()),
         View::Perspective {
@@ -62,9 +66,11 @@ fn per_iteration_queries_do_not_allocate() {
     g.update(&moved).unwrap();
     g.project_points(&points, &mut out);
     g.project_points_seeded(&points, &mut seeds, &mut out);
+    g.project_points_coherent(&points, &mut coherence, &mut out);
     for view in &views {
         g.project_points_front_facing(&points, view, &mut out);
         g.project_points_front_facing_seeded(&points, view, &mut seeds, &mut out);
+        g.project_points_front_facing_coherent(&points, view, &mut coherence, &mut out);
     }
     let single = g.project_front_facing(&points[0], &views[0]);
     let after = ALLOCATIONS.load(Ordering::SeqCst);

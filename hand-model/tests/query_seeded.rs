@@ -2,6 +2,8 @@
 //! return bit for bit what the unseeded ones return, whatever the seeds (none, stale, random,
 //! out of range), write the answers' elements back as seeds, and reject non-finite points; the
 //! culled plain projection is the exact argmin of Eq. 3.6 (ties to the lower element index).
+//! The coherent ones (`project_points_coherent`, `project_points_front_facing_coherent`) do
+//! too over a tracker's sequence of poses, while skipping most searches.
 
 mod common;
 
@@ -12,7 +14,7 @@ mod rendered;
 
 use common::*;
 use hand_like::hand_like_geometry;
-use hand_model::query::{Projection, SphereMeshGeometry, View, NO_SEED};
+use hand_model::query::{Coherence, Projection, SphereMeshGeometry, View, NO_SEED};
 use hand_model::shape::{Element, Sphere};
 use nalgebra::Vector3;
 use rand::Rng;
@@ -234,4 +236,103 @@ fn seeded_queries_reject_non_finite_points_and_check_lengths() {
         short.is_err(),
         "a seed slice of the wrong length is refused"
     );
+}
+
+/// `a + (b − a)·t` for every sphere.
+fn blend(a: &[Sphere], b: &[Sphere], t: f64) -> Vec<Sphere> {
+    a.iter()
+        .zip(b)
+        .map(|(a, b)| {
+            Sphere::new(
+                a.center.lerp(&b.center, t),
+                a.radius + (b.radius - a.radius) * t,
+            )
+        })
+        .collect()
+}
+
+/// Over a tracker's sequence of calls — small steps from the previous pose to the current one
+/// (shrinking like solver iterations), a reshape (radii), noisy points, then a jump back and a
+/// plain-projection call in between — the coherent queries answer bit for bit what the plain
+/// and front-facing ones answer on the same geometry (which equal brute force, above), and
+/// most points of the smallest step keep their element without a search.
+#[test]
+fn coherent_queries_on_a_tracked_sequence_equal_fresh_ones() {
+    let view = View::Perspective {
+        camera_center: Vector3::zeros(),
+    };
+    for scene in rendered::rendered_scenes() {
+        let n = scene.points.len();
+        let mut steps: Vec<(Vec<Sphere>, &[Vector3<f64>])> = [0.0, 0.5, 0.8, 0.95, 1.0]
+            .iter()
+            .map(|&t| (blend(&scene.previous, &scene.spheres, t), &scene.points[..]))
+            .collect();
+        let grown: Vec<Sphere> = scene
+            .spheres
+            .iter()
+            .enumerate()
+            .map(|(i, s)| Sphere::new(s.center, s.radius + 0.2 * (i % 3) as f64))
+            .collect();
+        steps.push((grown.clone(), &scene.points));
+        steps.push((grown, &scene.noisy));
+        steps.push((scene.previous.clone(), &scene.noisy));
+        for front_facing in [false, true] {
+            let mut state = Coherence::default();
+            let mut g = SphereMeshGeometry::new(&scene.spheres, &scene.elements).unwrap();
+            let (mut out, mut fresh) = (vec![None; n], vec![None; n]);
+            let mut kept = Vec::new();
+            for (spheres, points) in &steps {
+                g.update(spheres).unwrap();
+                if front_facing {
+                    g.project_points_front_facing_coherent(points, &view, &mut state, &mut out);
+                    g.project_points_front_facing(points, &view, &mut fresh);
+                } else {
+                    g.project_points_coherent(points, &mut state, &mut out);
+                    g.project_points(points, &mut fresh);
+                }
+                for (a, b) in out.iter().zip(&fresh) {
+                    assert_eq!(bits(a), bits(b), "{} {front_facing}", scene.name);
+                }
+                kept.push(state.kept());
+            }
+            // The first call searches everything; the smallest step mostly keeps.
+            assert_eq!(kept[0], 0);
+            assert!(kept[4] > n / 2, "{} {kept:?}", scene.name);
+        }
+    }
+}
+
+/// A coherent state filled on other points and another model (more spheres) still gives the
+/// plain answers, and non-finite points are answered `None` and forgotten.
+#[test]
+fn coherent_queries_ignore_a_foreign_state() {
+    let (spheres, elements) = hand_like_geometry();
+    let g = SphereMeshGeometry::new(&spheres, &elements).unwrap();
+    let mut rng = rng(34);
+    let refs: Vec<&Sphere> = spheres.iter().collect();
+    let mut points: Vec<Vector3<f64>> = (0..400)
+        .map(|_| random_point_near(&mut rng, &refs, 15.0))
+        .collect();
+    let mut state = Coherence::default();
+    let mut out = vec![None; points.len()];
+    g.project_points_coherent(&points, &mut state, &mut out);
+    // Other points (shuffled, moved) on a model with one more sphere.
+    points.reverse();
+    points
+        .iter_mut()
+        .step_by(2)
+        .for_each(|p| *p += random_vector(&mut rng, 5.0));
+    points[7] = Vector3::new(f64::NAN, 0.0, 0.0);
+    let mut more = spheres.clone();
+    more.push(Sphere::new(Vector3::new(0.0, 0.0, 500.0), 3.0));
+    let other = SphereMeshGeometry::new(&more, &elements).unwrap();
+    for g in [&other, &g] {
+        let mut fresh = vec![None; points.len()];
+        g.project_points(&points, &mut fresh);
+        g.project_points_coherent(&points, &mut state, &mut out);
+        for (a, b) in out.iter().zip(&fresh) {
+            assert_eq!(bits(a), bits(b));
+        }
+        assert!(out[7].is_none());
+    }
 }

@@ -5,8 +5,8 @@
 use std::borrow::Cow;
 
 use hand_model::kinematics::{Pose, PosedSkeleton, Skeleton};
-use hand_model::query::{Projection, SphereMeshGeometry, View, NO_SEED};
-use hand_model::render::{DepthRenderer, Intrinsics, PixelHit};
+use hand_model::query::{Coherence, Projection, SphereMeshGeometry, View};
+use hand_model::render::{DepthRenderer, Intrinsics, PixelHit, PixelRuns};
 use hand_model::shape::Element;
 use hand_model::solver::{IrlsParams, IterInfo, LmCallback, PoseContext, TermError};
 use hand_model::spheremesh::{PosedSphereMesh, SphereMeshTemplate};
@@ -64,9 +64,10 @@ pub struct TrackingCtx<'m> {
     geometry: SphereMeshGeometry,
     points: Vec<Vector3<f64>>,
     correspondences: Vec<Option<Projection>>,
-    /// Per point the element of its last correspondence: the first bound of the next search
-    /// (temporal coherence across iterations; results do not depend on it).
-    seeds: Vec<u32>,
+    /// Per point the element of its last plain projection and how far the other elements were:
+    /// most points skip the next search (temporal coherence across iterations; results do not
+    /// depend on it).
+    coherence: Coherence,
     directions: Vec<Vector3<f64>>,
     residuals: Vec<f64>,
     weights: Vec<f64>,
@@ -79,11 +80,12 @@ pub struct TrackingCtx<'m> {
     m2d: Option<M2dMode>,
     m2d_stride: u32,
     renderer: DepthRenderer,
-    /// Per sensor pixel whether [`M2dMode::Render`] casts its ray there (on the stride grid and
+    /// The sensor pixels where [`M2dMode::Render`] casts its ray (on the stride grid and
     /// outside the sensor silhouette), built once per frame and stride: tested per footprint
     /// pixel of every element instead, it took four integer divisions each, ≈ 60 % of the
-    /// rendering.
-    render_mask: Vec<bool>,
+    /// rendering; as runs per row, the renderer skips the footprint pixels inside the
+    /// silhouette (most of them) without visiting them.
+    render_mask: PixelRuns,
     /// Whether `render_mask` is that of the current sensor data and stride.
     render_mask_valid: bool,
     hits: Vec<PixelHit>,
@@ -159,7 +161,7 @@ impl<'m> TrackingCtx<'m> {
             geometry,
             points: Vec::new(),
             correspondences: Vec::new(),
-            seeds: Vec::new(),
+            coherence: Coherence::default(),
             directions: Vec::new(),
             residuals: Vec::new(),
             weights: Vec::new(),
@@ -172,7 +174,7 @@ impl<'m> TrackingCtx<'m> {
             m2d: Some(M2dMode::Render),
             m2d_stride: 1,
             renderer: DepthRenderer::new(),
-            render_mask: Vec::new(),
+            render_mask: PixelRuns::default(),
             render_mask_valid: false,
             hits: Vec::new(),
             pushes: Vec::new(),
@@ -195,8 +197,7 @@ impl<'m> TrackingCtx<'m> {
         self.points.extend_from_slice(points);
         self.correspondences.clear();
         self.correspondences.resize(n, None);
-        self.seeds.clear();
-        self.seeds.resize(n, NO_SEED);
+        self.coherence.clear();
         self.directions.clear();
         self.directions.resize(n, Vector3::zeros());
         self.residuals.clear();
@@ -277,19 +278,19 @@ impl<'m> TrackingCtx<'m> {
             self.correspondences.fill(None);
             return Err(TermError::Failed("posed spheres are not finite"));
         }
-        // Seeded by each point's previous element: the same correspondences as the unseeded
-        // search (bit for bit, whatever the seeds), found with a tight bound from the start.
+        // Each point's previous element and margin: the same correspondences as a fresh search
+        // (bit for bit), most of them without searching.
         if self.front_facing {
-            self.geometry.project_points_front_facing_seeded(
+            self.geometry.project_points_front_facing_coherent(
                 &self.points,
                 &self.view,
-                &mut self.seeds,
+                &mut self.coherence,
                 &mut self.correspondences,
             );
         } else {
-            self.geometry.project_points_seeded(
+            self.geometry.project_points_coherent(
                 &self.points,
-                &mut self.seeds,
+                &mut self.coherence,
                 &mut self.correspondences,
             );
         }
@@ -332,27 +333,20 @@ impl<'m> TrackingCtx<'m> {
                 let nearest = &sensor.nearest;
                 let (w, stride) = (camera.width as usize, self.m2d_stride as usize);
                 let outside = |i: usize| nearest.get(i).is_none_or(|&n| n as usize != i);
-                let h = camera.height as usize;
-                if !self.render_mask_valid || self.render_mask.len() != w * h {
-                    let mask = &mut self.render_mask;
-                    mask.clear();
-                    mask.resize(w * h, false);
-                    for i in (0..h)
-                        .step_by(stride)
-                        .flat_map(|v| (v * w..(v + 1) * w).step_by(stride))
-                    {
-                        mask[i] = outside(i);
-                    }
+                if !self.render_mask_valid {
+                    // Without the divisions on the (default) full grid.
+                    let on_grid =
+                        |i: usize| stride == 1 || ((i % w) % stride == 0 && (i / w) % stride == 0);
+                    self.render_mask
+                        .set(camera.width, camera.height, |i| on_grid(i) && outside(i));
                     self.render_mask_valid = true;
                 }
-                let mask = &self.render_mask;
-                let outside = |i: usize| mask.get(i).copied().unwrap_or(false);
                 self.renderer
                     .render_hits(
                         &intrinsics(camera),
                         &self.posed.spheres,
                         &self.elements,
-                        outside,
+                        &self.render_mask,
                         &mut self.hits,
                     )
                     .map_err(|_| TermError::Failed("invalid sensor camera"))?;
@@ -548,9 +542,10 @@ impl LmCallback<TrackingCtx<'_>> for CorrespondenceCallback {
 mod tests {
     use super::*;
     use crate::synthetic::rendered_frame;
+    use hand_model::render::KeptPixels;
     use hand_model::spheremesh::default_right_hand;
 
-    /// The per-frame mask of the rendered pixels is the per-pixel test it replaces (stride grid,
+    /// The per-frame set of the rendered pixels is the per-pixel test it replaces (stride grid,
     /// outside the silhouette) at every pixel, and follows stride and frame changes: the
     /// pushes after them are those of a fresh context.
     #[test]
@@ -573,6 +568,9 @@ mod tests {
             ctx.update(&pose, false).unwrap();
             let (w, s) = (camera.width as usize, stride as usize);
             let nearest = &ctx.sensor().nearest;
+            let got: Vec<bool> = (0..w * camera.height as usize)
+                .map(|i| (&ctx.render_mask).keeps(i))
+                .collect();
             let expected: Vec<bool> = (0..w * camera.height as usize)
                 .map(|i| {
                     (i % w) % s == 0
@@ -580,7 +578,7 @@ mod tests {
                         && nearest.get(i).is_none_or(|&n| n as usize != i)
                 })
                 .collect();
-            assert_eq!(ctx.render_mask, expected, "stride {stride}");
+            assert_eq!(got, expected, "stride {stride}");
             let mut fresh = TrackingCtx::new(&t, view, IrlsParams::default()).unwrap();
             fresh.set_frame(frame);
             fresh.set_m2d_stride(stride);

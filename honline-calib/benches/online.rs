@@ -46,6 +46,47 @@
 //! ≈ 130–140 frames/s: still short of 200. What remains is mostly the correspondence refresh
 //! (the branch-and-bound closest points ≈ 35 % of the frame in `perf`, the m2d footprints and
 //! ray casts ≈ 20 %) and the pose-only solve shared with the plain tracker.
+//!
+//! Then (branch `speed9`): the correspondence refresh of both trackers, its results bit for bit
+//! unchanged. (1) Temporal coherence of the closest-point search
+//! (`SphereMeshGeometry::project_points_coherent`, `hand_model::query::Coherence`): each point
+//! keeps its element and a margin (how far every other element was), and the search is skipped
+//! while the element is nearer than the margin less the point's motion and the motion of the
+//! elements whose bounding balls are within reach (a bending finger moves its tip ≈ 9 mm in
+//! one iteration while the palm barely moves, so the motion is taken per element); full
+//! searches look 4 mm beyond the minimum to set a margin that lasts. Over a frame ≈ 60 % of the
+//! point projections skip the search (0 % in the first iteration, ≈ 45 % / 25 % in the two
+//! large steps after it, ≈ 90 % in the last ones). (2) The m2d render footprints are the hull of
+//! the discs with their own radii (tangent quadrilaterals per pair, framed once per element)
+//! instead of every disc grown to the largest: about half the rays along the model's outline.
+//! (3) The pixels to render are kept as runs per row (`hand_model::render::PixelRuns`), so the
+//! footprint rows are not visited pixel by pixel (no measurable gain alone). Same machine,
+//! heavily shared this time (load ≈ 4 on 2 cores), three alternating runs of the binaries
+//! before and after, medians (µs; the one run of each disturbed by the load left out):
+//!
+//! | median (µs)                     | before        | after         | after / before |
+//! |---------------------------------|---------------|---------------|----------------|
+//! | criterion, whole frame          | 7 480–7 610   | 6 560–7 060   | ≈ 0.90         |
+//! | `track` (in-process, stages)    | 7 100–7 230   | 6 440–6 470   | ≈ 0.90         |
+//! | `correspondences`               | 5 050–5 140   | 4 360–4 380   | ≈ 0.86         |
+//! | `solve` (terms, factorization)  | 1 590–1 620   | 1 610–1 620   | 1.00           |
+//! | `reshape`, `laplace`, `filter`  | 56, 83, 254   | 57, 84, 255   | 1.00           |
+//! | criterion, plain sphere-mesh    | 6 800–7 210   | 6 000–6 290   | ≈ 0.87         |
+//! | `track`, plain sphere-mesh      | 6 340–6 410   | 5 730–5 770   | ≈ 0.90         |
+//!
+//! ≈ 150 frames/s (in-process `track`; ≈ 145 by criterion), against 200: **still not met**.
+//! `hands bench --model online --frames 120` (teaser motion, ToF noise; two alternating runs):
+//! total µs/frame spheremesh 13 270–13 750 → 12 410–12 430, online 12 580–12 910 → 12 430–
+//! 14 220 (noise), correspondences spheremesh 11 150–11 500 → 10 260–10 300, online 10 250–
+//! 10 510 → 10 190–10 250: its frames spend twice the bench's time in the correspondence
+//! refresh (noisy points: many back-facing footpoints, the silhouette substitutes), which these
+//! changes barely touch. What remains in this bench (`perf`): the closest points ≈ 40 %
+//! (the first iteration of a frame searches every point in full; a point that skips the
+//! search still pays its element's full projection, ≈ 40–70 ns), the m2d footprints and ray
+//! casts ≈ 12 %, the per-element shape rows (`ShapeRows`) ≈ 12 %, the Cholesky factorization
+//! and solves ≈ 6 %. A cheaper re-check of a spent margin (evaluating only the elements that
+//! moved enough to matter instead of a full search) was tried and measured no gain; it is not
+//! kept.
 
 #[path = "../tests/common/mod.rs"]
 mod common;

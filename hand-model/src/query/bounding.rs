@@ -238,7 +238,7 @@ impl BallBlocks {
     // The negated comparisons keep a lane whose test is NaN: culling must never drop the
     // true answer, so an incomparable bound counts as "may be closer".
     #[allow(clippy::neg_cmp_op_on_partial_ord)]
-    #[inline]
+    #[inline(always)]
     pub(crate) fn survivors(&self, q: &BlockQuery, block: usize, best: f64) -> u32 {
         let reach = (best + q.margin_scale + 1e-5 * best.abs()) as f32;
         let culled = |x: f32, y: f32, z: f32, r: f32| {

@@ -36,6 +36,7 @@
 //!   that are dropped.
 //! - If no candidate survives, the plain (back-facing) projection is returned.
 
+use super::coherence::Coherence;
 use super::geometry::{ElementFrame, SphereMeshGeometry};
 use super::point_wedge::WedgeFrame;
 use super::silhouette::ViewBasis;
@@ -53,6 +54,17 @@ pub const BURIED_TOLERANCE: f64 = 1e-6;
 const CREASE_ITERATIONS: usize = 6;
 /// Buried candidates kept per query for crease searches.
 const MAX_CREASE_SEARCHES: usize = 16;
+
+/// How a front-facing batch finds its plain projections (Eq. 3.6) before replacing the
+/// back-facing ones.
+enum PlainSearch<'a> {
+    /// From the bounding-tree guess.
+    Fresh,
+    /// From the given seeds (written back by `project_batch`).
+    Seeded(&'a mut [u32]),
+    /// With the temporal coherence of `coherence.rs`.
+    Coherent(&'a mut Coherence),
+}
 
 impl SphereMeshGeometry {
     /// Front-facing closest-point correspondence for a monocular view (thesis §3.3.1, Fig. 3.9):
@@ -90,7 +102,7 @@ impl SphereMeshGeometry {
         view: &View,
         out: &mut [Option<Projection>],
     ) {
-        self.front_facing_batch(points, view, None, out);
+        self.front_facing_batch(points, view, PlainSearch::Fresh, out);
     }
 
     /// [`project_points_front_facing`](Self::project_points_front_facing) with temporal
@@ -113,19 +125,38 @@ impl SphereMeshGeometry {
         out: &mut [Option<Projection>],
     ) {
         assert_eq!(points.len(), seeds.len(), "one seed per point");
-        self.front_facing_batch(points, view, Some(&mut *seeds), out);
+        self.front_facing_batch(points, view, PlainSearch::Seeded(&mut *seeds), out);
         for (s, o) in seeds.iter_mut().zip(out.iter()) {
             *s = o.map_or(NO_SEED, |q| q.element);
         }
     }
 
-    /// The front-facing batch, seeded or not.
+    /// [`project_points_front_facing`](Self::project_points_front_facing) with the plain
+    /// projections of [`project_points_coherent`](Self::project_points_coherent): for a tracker
+    /// that re-projects the same points every solver iteration, most points skip the search of
+    /// Eq. 3.6. `out` is bit for bit what the call without `state` returns, whatever `state`
+    /// holds. Allocates nothing once `state` has held as many points.
+    ///
+    /// # Panics
+    /// If `out.len() != points.len()`.
+    #[track_caller]
+    pub fn project_points_front_facing_coherent(
+        &self,
+        points: &[Vector3<f64>],
+        view: &View,
+        state: &mut Coherence,
+        out: &mut [Option<Projection>],
+    ) {
+        self.front_facing_batch(points, view, PlainSearch::Coherent(state), out);
+    }
+
+    /// The front-facing batch with the plain projections found by `plain`.
     #[track_caller]
     fn front_facing_batch(
         &self,
         points: &[Vector3<f64>],
         view: &View,
-        seeds: Option<&mut [u32]>,
+        plain: PlainSearch<'_>,
         out: &mut [Option<Projection>],
     ) {
         assert_eq!(points.len(), out.len(), "one output slot per point");
@@ -133,7 +164,11 @@ impl SphereMeshGeometry {
             out.fill(None);
             return;
         }
-        self.project_batch(points, seeds, out);
+        match plain {
+            PlainSearch::Fresh => self.project_batch(points, None, out),
+            PlainSearch::Seeded(seeds) => self.project_batch(points, Some(seeds), out),
+            PlainSearch::Coherent(state) => self.project_points_coherent(points, state, out),
+        }
         if !out
             .iter()
             .any(|o| o.is_some_and(|q| view.is_back_facing(&q.point, &q.normal)))

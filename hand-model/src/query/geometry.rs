@@ -285,7 +285,7 @@ impl SphereMeshGeometry {
         let e = match seed.filter(|&e| e < self.frames.len()) {
             Some(first) => {
                 let pr = self.frames[first].project(p);
-                let (e, _) = self.search(p, first, pr.distance);
+                let (e, _) = self.search(p, first, pr.distance, 0.0).nearest;
                 if e == first {
                     return Some(self.globalize(e, pr));
                 }
@@ -388,22 +388,29 @@ impl SphereMeshGeometry {
             Some(e) => e,
             None => self.tree.guess(p)?,
         };
-        Some(self.search(p, first, self.frames[first].distance(p)))
+        Some(
+            self.search(p, first, self.frames[first].distance(p), 0.0)
+                .nearest,
+        )
     }
 
     /// Branch and bound for the argmin of Eq. 3.6, given element `first` at distance `best`:
     /// every other element is evaluated only if its bound `‖p − C_e‖ − R_e` is not above the
-    /// best distance so far. Blocks of bounding balls are first tested at once in `f32` with a
-    /// widened bound ([`BallBlocks`]), and the survivors are evaluated. A skipped element has
-    /// `φ_e(p) > d`, every
-    /// element tied with the final minimum is evaluated, and ties go to the lower index, so the
-    /// answer is the exact argmin whatever `first` and the evaluation order: seeds change the
-    /// cost, never the result.
-    fn search(&self, p: &Vector3<f64>, first: usize, mut best: f64) -> (usize, f64) {
+    /// best distance so far plus `gap`. Blocks of bounding balls are first tested at once in
+    /// `f32` with a widened bound ([`BallBlocks`]), and the survivors are evaluated. A skipped
+    /// element has `φ_e(p) > d + gap`, every element tied with the final minimum is evaluated,
+    /// and ties go to the lower index, so the answer is the exact argmin whatever `first`, `gap`
+    /// and the evaluation order: seeds and gaps change the cost, never the result.
+    ///
+    /// A positive `gap` evaluates the elements within `gap` of the minimum as well, which makes
+    /// [`Search::margin`] a lower bound that lasts (see `coherence.rs`).
+    pub(super) fn search(&self, p: &Vector3<f64>, first: usize, mut best: f64, gap: f64) -> Search {
         let mut best_e = first;
+        // The smallest value seen of another element than `best_e`: its `φ_e` or a lower bound.
+        let mut second = f64::INFINITY;
         let query = self.blocks.query(p);
         for block in 0..self.blocks.len() {
-            let mut mask = self.blocks.survivors(&query, block, best);
+            let mut mask = self.blocks.survivors(&query, block, best + gap);
             let lanes = self.blocks.elements(block);
             while mask != 0 {
                 let e = lanes[mask.trailing_zeros() as usize] as usize;
@@ -417,14 +424,22 @@ impl SphereMeshGeometry {
                 if e == first {
                     continue;
                 }
-                let d = frame.distance_below(p, best);
+                let d = frame.distance_below(p, best + gap);
                 if d < best || (d == best && e < best_e) {
+                    second = second.min(best);
                     best = d;
                     best_e = e;
+                } else {
+                    second = second.min(d);
                 }
             }
         }
-        (best_e, best)
+        Search {
+            nearest: (best_e, best),
+            // Skipped elements and those `distance_below` bounded are above the culling bound
+            // of their time, never below the final `best + gap`.
+            margin: second.min(best + gap),
+        }
     }
 
     /// Re-expresses an element-local projection over the model's sphere indices.
@@ -434,6 +449,16 @@ impl SphereMeshGeometry {
         pr.element = element as u32;
         pr
     }
+}
+
+/// The answer of [`SphereMeshGeometry::search`].
+#[derive(Copy, Clone, Debug, PartialEq)]
+pub(super) struct Search {
+    /// The element minimising `φ_e(p)`, and that minimum.
+    pub(super) nearest: (usize, f64),
+    /// A lower bound of `φ_e(p)` over every other element `e`, at least the minimum (equal to
+    /// it with a zero gap when another element ties).
+    pub(super) margin: f64,
 }
 
 /// The origin of the `f32` culling blocks: the center of the model's bounding ball, so that

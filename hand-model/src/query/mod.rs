@@ -24,6 +24,7 @@
 
 mod bounding;
 mod bvh;
+mod coherence;
 mod front_facing;
 mod geometry;
 mod implicit;
@@ -34,6 +35,7 @@ mod union_silhouette;
 mod view;
 
 pub use self::bounding::BoundingBall;
+pub use self::coherence::Coherence;
 pub use self::front_facing::BURIED_TOLERANCE;
 pub use self::geometry::{GeometryError, SphereMeshGeometry};
 pub use self::implicit::{phi_pill, phi_wedge};

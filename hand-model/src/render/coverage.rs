@@ -7,9 +7,12 @@
 //! maps convex sets in front of the camera to convex sets. Each ellipse lies in the disc around
 //! the projected center `π(c)` of radius `δ + max(a, b)` (`δ` the offset of the ellipse center
 //! from `π(c)`, `a`, `b` its semi-axes, all in closed form), so the element's image lies in the
-//! convex hull of those discs, which is covered by the hull of the same discs all with the
-//! largest radius: a 2D capsule per pair of spheres. Its intersection with a pixel row is an
-//! interval, computed exactly; the pixels of that interval are the element's candidates.
+//! convex hull of those discs: the union of the discs and, per pair of discs, the quadrilateral
+//! between their outer tangents (the hull of three discs adds the triangle of their centers,
+//! which lies between the pieces on every row). Its intersection with a pixel row is an
+//! interval, computed exactly; the pixels of that interval are the element's candidates. (With
+//! every disc grown to the largest radius the hull was simpler, but a fingertip's footprint
+//! then had the width of its base: twice the rays cast along the model's outline.)
 //! Spheres not entirely in front of the camera (or seen at grazing angles) make their element a
 //! candidate everywhere.
 
@@ -21,14 +24,25 @@ use crate::shape::Sphere;
 /// Slack (pixels) added to every projected radius: covers rounding only, the bound is exact.
 const SLACK_PX: f64 = 0.5;
 
-/// The conservative screen footprint of one element: the hull of discs of one radius.
+/// The conservative screen footprint of one element: the hull of discs.
 #[derive(Copy, Clone, Debug, PartialEq)]
+#[expect(
+    clippy::large_enum_variant,
+    reason = "one footprint at a time lives on the stack of the renderer's element loop"
+)]
 pub(crate) enum Footprint {
-    /// Centers (pixels) of the element's spheres, the count used, and the common radius.
-    Discs([Vector2<f64>; 3], usize, f64),
+    /// Centers (pixels) of the element's spheres, their radii, the count used, and the
+    /// tangent quadrilaterals between pairs of discs (`None` where one disc holds the other).
+    Discs([Vector2<f64>; 3], [f64; 3], usize, [Option<Quad>; 3]),
     /// The element may be seen at any pixel.
     Everywhere,
 }
+
+/// The quadrilateral between the outer tangents of two discs (its corners are the tangent
+/// points, in order around it), computed once per element instead of once per pixel row
+/// ([`Footprint::span`] runs for every row).
+#[derive(Copy, Clone, Debug, PartialEq)]
+pub(crate) struct Quad([Vector2<f64>; 4]);
 
 /// Radius (in normalized image units) of a disc around `π(c)` holding the image of the sphere,
 /// or `None` when the sphere is not safely in front of the camera.
@@ -59,19 +73,25 @@ impl Footprint {
     pub(crate) fn new(intr: &Intrinsics, spheres: &[Sphere]) -> Self {
         let f = intr.fx.max(intr.fy);
         let mut centers = [Vector2::zeros(); 3];
-        let mut radius: f64 = 0.0;
-        for (c, s) in centers.iter_mut().zip(spheres) {
+        let mut radii = [0.0; 3];
+        for ((c, radius), s) in centers.iter_mut().zip(&mut radii).zip(spheres) {
             let Some(r) = image_radius(s) else {
                 return Self::Everywhere;
             };
             let [u, v] = intr.project(&s.center);
             *c = Vector2::new(u, v);
-            radius = radius.max(f * r + SLACK_PX);
+            *radius = f * r + SLACK_PX;
         }
-        if !radius.is_finite() || centers.iter().any(|c| !c.iter().all(|x| x.is_finite())) {
+        let finite = |c: &Vector2<f64>| c.iter().all(|x| x.is_finite());
+        if !radii.iter().all(|r| r.is_finite()) || !centers.iter().all(finite) {
             return Self::Everywhere;
         }
-        Self::Discs(centers, spheres.len().min(3), radius)
+        let n = spheres.len().min(3);
+        let mut quads = [None; 3];
+        for (quad, &(i, j)) in quads.iter_mut().zip(PAIRS.iter().filter(|&&(_, j)| j < n)) {
+            *quad = Quad::new(&centers[i], radii[i], &centers[j], radii[j]);
+        }
+        Self::Discs(centers, radii, n, quads)
     }
 
     /// The rows `[v0, v1]` (inclusive, clipped to `height`) the footprint may touch; `None` when
@@ -80,10 +100,15 @@ impl Footprint {
         let last = f64::from(height) - 1.0;
         let (lo, hi) = match self {
             Self::Everywhere => (0.0, last),
-            Self::Discs(c, n, r) => {
-                let ys = c[..*n].iter().map(|p| p.y);
-                let lo = ys.clone().fold(f64::INFINITY, f64::min) - r;
-                let hi = ys.fold(f64::NEG_INFINITY, f64::max) + r;
+            Self::Discs(c, r, n, _) => {
+                let discs = c[..*n].iter().zip(r);
+                let lo = discs
+                    .clone()
+                    .map(|(p, r)| p.y - r)
+                    .fold(f64::INFINITY, f64::min);
+                let hi = discs
+                    .map(|(p, r)| p.y + r)
+                    .fold(f64::NEG_INFINITY, f64::max);
                 (lo.ceil().max(0.0), hi.floor().min(last))
             }
         };
@@ -95,7 +120,7 @@ impl Footprint {
         let last = f64::from(width) - 1.0;
         let (lo, hi) = match self {
             Self::Everywhere => (0.0, last),
-            Self::Discs(c, n, r) => {
+            Self::Discs(c, r, n, quads) => {
                 let y = f64::from(v);
                 let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
                 let mut add = |iv: Option<(f64, f64)>| {
@@ -104,11 +129,11 @@ impl Footprint {
                         hi = hi.max(b);
                     }
                 };
-                for i in 0..*n {
-                    add(disc_row(&c[i], *r, y));
-                    for j in i + 1..*n {
-                        add(strip_row(&c[i], &c[j], *r, y));
-                    }
+                for (center, r) in c[..*n].iter().zip(r) {
+                    add(disc_row(center, *r, y));
+                }
+                for quad in quads.iter().flatten() {
+                    add(quad.row(y));
                 }
                 (lo.ceil().max(0.0), hi.floor().min(last))
             }
@@ -127,32 +152,51 @@ fn disc_row(c: &Vector2<f64>, r: f64, y: f64) -> Option<(f64, f64)> {
     })
 }
 
-/// `{u : (u, y) in the rectangle swept by the segment ab moved ±r along its normal}`.
-fn strip_row(a: &Vector2<f64>, b: &Vector2<f64>, r: f64, y: f64) -> Option<(f64, f64)> {
-    let e = b - a;
-    let len = e.norm();
-    if len <= 1e-12 {
-        return None; // the discs cover it
-    }
-    let t = e / len;
-    let n = Vector2::new(-t.y, t.x);
-    let (mut lo, mut hi) = (f64::NEG_INFINITY, f64::INFINITY);
-    // k·(u − a.x) + m ∈ [min, max] for (k, m) = (t.x, t.y (y − a.y)) and (n.x, n.y (y − a.y)).
-    for (k, m, min, max) in [
-        (t.x, t.y * (y - a.y), 0.0, len),
-        (n.x, n.y * (y - a.y), -r, r),
-    ] {
-        if k.abs() <= 1e-12 {
-            if m < min || m > max {
-                return None;
-            }
-            continue;
+/// The pairs of discs joined by tangent quadrilaterals (the first one only for two discs).
+const PAIRS: [(usize, usize); 3] = [(0, 1), (0, 2), (1, 2)];
+
+impl Quad {
+    /// The quadrilateral between the outer tangents of the discs `(a, ra)` and `(b, rb)`;
+    /// `None` when one disc holds the other (the discs then cover the hull).
+    fn new(a: &Vector2<f64>, ra: f64, b: &Vector2<f64>, rb: f64) -> Option<Self> {
+        let e = b - a;
+        let len = e.norm();
+        if len <= (ra - rb).abs() || len <= 1e-12 {
+            return None;
         }
-        let (p, q) = ((min - m) / k + a.x, (max - m) / k + a.x);
-        lo = lo.max(p.min(q));
-        hi = hi.min(p.max(q));
+        // The outer tangents' unit normals n have n·(b − a) = ra − rb.
+        let t = e / len;
+        let perp = Vector2::new(-t.y, t.x);
+        let sine = (ra - rb) / len;
+        let cosine = (1.0 - sine * sine).sqrt();
+        let (plus, minus) = (t * sine + perp * cosine, t * sine - perp * cosine);
+        Some(Self([
+            a + plus * ra,
+            b + plus * rb,
+            b + minus * rb,
+            a + minus * ra,
+        ]))
     }
-    (lo <= hi).then_some((lo, hi))
+
+    /// `{u : (u, y) in the quadrilateral}`: where row `y` crosses its edges.
+    fn row(&self, y: f64) -> Option<(f64, f64)> {
+        let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
+        for (i, p) in self.0.iter().enumerate() {
+            let q = &self.0[(i + 1) % 4];
+            if (p.y - y) * (q.y - y) > 0.0 {
+                continue; // the edge is entirely above or below the row
+            }
+            let (x0, x1) = if p.y == q.y {
+                (p.x, q.x) // an edge along the row
+            } else {
+                let x = p.x + (y - p.y) * (q.x - p.x) / (q.y - p.y);
+                (x, x)
+            };
+            lo = lo.min(x0.min(x1));
+            hi = hi.max(x0.max(x1));
+        }
+        (lo <= hi).then_some((lo, hi))
+    }
 }
 
 #[cfg(test)]

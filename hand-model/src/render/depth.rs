@@ -12,6 +12,7 @@
 use nalgebra::Vector3;
 
 use super::coverage::Footprint;
+use super::pixels::KeptPixels;
 use super::prepared::PreparedElement;
 use super::raycast::{cast_prepared, Ray, RayHit};
 use crate::error::{ModelError, Result};
@@ -219,8 +220,9 @@ impl DepthRenderer {
     }
 
     /// The pixels that see the model, as a list instead of an image (what the m2d term of
-    /// Eq. 3.5 needs per solver iteration: no full-image buffers to clear): only pixels for
-    /// which `keep(v·width + u)` holds are ray cast, and each one that hits is appended to
+    /// Eq. 3.5 needs per solver iteration: no full-image buffers to clear): only the pixels
+    /// `v·width + u` that `keep` keeps (a predicate or a [`PixelRuns`](super::PixelRuns) set)
+    /// are ray cast, and each one that hits is appended to
     /// `out` (cleared first) in raster order. Same rays and hits as [`render`](Self::render),
     /// same errors.
     ///
@@ -234,7 +236,7 @@ impl DepthRenderer {
         intrinsics: &Intrinsics,
         spheres: &[Sphere],
         elements: &[Element],
-        mut keep: impl FnMut(usize) -> bool,
+        mut keep: impl KeptPixels,
         out: &mut Vec<PixelHit>,
     ) -> Result<()> {
         out.clear();
@@ -257,6 +259,7 @@ impl DepthRenderer {
         let (w, h) = (intrinsics.width, intrinsics.height);
         self.candidates.resize(w as usize * h as usize, 0);
         self.touched.clear();
+        let (candidates, touched) = (&mut self.candidates, &mut self.touched);
         let mut sph = [Sphere::new(Vector3::zeros(), 0.0); 3];
         for (e, el) in elements.iter().enumerate() {
             let ids = el.spheres();
@@ -269,15 +272,13 @@ impl DepthRenderer {
                 let Some((u0, u1)) = fp.span(v, w) else {
                     continue;
                 };
-                for u in u0..=u1 {
+                keep.for_each_in_row(w, v, u0, u1, |u| {
                     let k = (v * w + u) as usize;
-                    if keep(k) {
-                        if self.candidates[k] == 0 {
-                            self.touched.push(k as u32);
-                        }
-                        self.candidates[k] |= 1 << e;
+                    if candidates[k] == 0 {
+                        touched.push(k as u32);
                     }
-                }
+                    candidates[k] |= 1 << e;
+                });
             }
         }
         self.touched.sort_unstable();
@@ -321,7 +322,7 @@ impl DepthRenderer {
         intrinsics: &Intrinsics,
         spheres: &[Sphere],
         elements: &[Element],
-        mut keep: impl FnMut(usize) -> bool,
+        mut keep: impl KeptPixels,
         mut on_hit: impl FnMut(usize, &RayHit),
     ) -> Result<()> {
         intrinsics.validate()?;
@@ -341,7 +342,7 @@ impl DepthRenderer {
                 for v in ty * TILE..((ty + 1) * TILE).min(h) {
                     for u in tx * TILE..((tx + 1) * TILE).min(w) {
                         let k = v * w + u;
-                        if !keep(k) {
+                        if !keep.keeps(k) {
                             continue;
                         }
                         let ray = intrinsics.pixel_ray(u as f64, v as f64);
@@ -460,7 +461,7 @@ pub fn render_depth(
 mod tests {
     use super::*;
     use crate::kinematics::Pose;
-    use crate::render::cast_ray;
+    use crate::render::{cast_ray, PixelRuns};
     use crate::spheremesh::{default_right_hand, PosedSphereMesh};
 
     fn intrinsics(width: u32, height: u32, f: f64) -> Intrinsics {
@@ -550,6 +551,14 @@ mod tests {
                         assert_eq!(h.element, image.element[k]);
                         assert_eq!(h.point.z as f32, image.depth[k]);
                     }
+                    // The same pixels as runs: the same hits.
+                    let mut runs = PixelRuns::default();
+                    runs.set(intr.width, intr.height, keep);
+                    let mut from_runs = Vec::new();
+                    renderer
+                        .render_hits(&intr, &spheres, &elements, &runs, &mut from_runs)
+                        .unwrap();
+                    assert_eq!(from_runs, hits);
                 }
             }
         }

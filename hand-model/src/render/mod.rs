@@ -14,6 +14,7 @@ pub mod depth;
 pub mod glb;
 pub mod mesh;
 pub mod obj;
+mod pixels;
 mod prepared;
 pub mod preview;
 pub mod raycast;
@@ -22,6 +23,7 @@ mod testutil;
 
 pub use depth::{render_depth, DepthRender, DepthRenderer, Intrinsics, PixelHit, NO_ELEMENT};
 pub use mesh::{extract_mesh, MeshOptions, TriMesh};
+pub use pixels::{KeptPixels, PixelRuns};
 pub use prepared::PreparedElement;
 pub use raycast::{
     cast_ray, cast_ray_element, cast_ray_pill, cast_ray_wedge, Ray, RayHit, SurfaceHit,

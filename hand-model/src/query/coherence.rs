@@ -1,0 +1,235 @@
+//! Temporal coherence of the closest-point search across re-posings: a tracker re-projects the
+//! same ~2500 sensor points on a slightly moved model every solver iteration (§3.3.1), and the
+//! element that won a point's argmin (Eq. 3.6) usually wins it again, by a clear margin.
+//!
+//! The signed distance of an element is `φ_e(p) = min_λ ‖p − Σ λᵢ cᵢ‖ − Σ λᵢ rᵢ` over a fixed
+//! set of barycentric weights `λ` (the closed forms of Fig. 3.7 evaluate exactly this minimum),
+//! so moving the element's spheres by `Δcᵢ` and changing their radii by `Δrᵢ` changes `φ_e(p)` by
+//! at most its motion `δ_e = maxᵢ (‖Δcᵢ‖ + |Δrᵢ|)`, and moving `p` changes it by at most `‖Δp‖`.
+//! Say that after the last call every element but the winner `e*` was at least `m` from `p`
+//! (the *margin*), and let `M = m − ‖Δp‖`. Now an element whose bounding ball is farther than
+//! `M` is farther than `M`, and any other element `e` is at least `M − δ_e` away; so every
+//! element but `e*` is at least `m' = M − max δ_e` away, the maximum taken over the elements
+//! whose balls are within `M` (the cheap vectorised ball test of the search). When `φ_{e*}(p)`
+//! is below `m'`, `e*` is the argmin again without evaluating any other element, and `m'` is
+//! the new margin. Taking the motion per element matters: a bending finger moves its tip by
+//! several millimetres per solver iteration while the palm and the other fingers barely move.
+//!
+//! A margin equal to the minimum would expire at the first motion, so the searches that set it
+//! evaluate every element within [`MARGIN_GAP`] of the minimum (see
+//! [`SphereMeshGeometry::search`]): the margin is then the second smallest distance, capped at
+//! the minimum plus the gap. The answers are bit for bit those of the plain search.
+
+use super::geometry::SphereMeshGeometry;
+use super::{is_usable, Projection, NO_SEED};
+use crate::shape::{Element, Sphere};
+use nalgebra::Vector3;
+
+/// How far beyond the minimum (mm) a full search looks for the margin: a wider gap costs more
+/// element evaluations per full search and saves more searches afterwards. Within one tracked
+/// frame the model moves a few millimetres in total over the solver iterations.
+pub(super) const MARGIN_GAP: f64 = 4.0;
+
+/// Relative rounding allowance of a margin per use: the margins, distances and motions compared
+/// are computed in floating point, each to ~1e-15 of the coordinates' magnitude.
+const ROUNDING: f64 = 1e-9;
+
+/// The per-point memory of [`SphereMeshGeometry::project_points_coherent`] and
+/// [`SphereMeshGeometry::project_points_front_facing_coherent`] between calls: the winning
+/// element of each point's last search and how far every other element was, with the spheres
+/// and points that held for. Build it empty with [`Coherence::default`]; the calls size it and
+/// allocate nothing once it has held as many points and spheres.
+///
+/// The state only saves work: whatever it holds (another model, other points, stale
+/// answers), the projections are bit for bit those of
+/// [`project_points`](SphereMeshGeometry::project_points).
+#[derive(Clone, Debug, Default)]
+pub struct Coherence {
+    tracks: Vec<Track>,
+    /// The spheres and elements of the last call.
+    spheres: Vec<Sphere>,
+    elements: Vec<Element>,
+    /// Per element its motion `δ_e` since the last call (+∞ after a change of model).
+    motions: Vec<f64>,
+    /// How many points of the last call kept their element without a search.
+    kept: usize,
+}
+
+/// One point's memory.
+#[derive(Copy, Clone, Debug, PartialEq)]
+struct Track {
+    /// The plain argmin element of the last call ([`NO_SEED`] for none).
+    element: u32,
+    /// A lower bound of `φ_e(point)` over every other element `e` at the last call's spheres.
+    margin: f64,
+    /// The point the margin is for.
+    point: Vector3<f64>,
+}
+
+impl Track {
+    const NONE: Self = Self {
+        element: NO_SEED,
+        margin: f64::NEG_INFINITY,
+        point: Vector3::new(0.0, 0.0, 0.0),
+    };
+}
+
+impl Coherence {
+    /// How many points of the last call kept their previous element without a search (a
+    /// measure of the saved work).
+    pub fn kept(&self) -> usize {
+        self.kept
+    }
+
+    /// Forgets every point (the next call searches them all in full).
+    pub fn clear(&mut self) {
+        self.tracks.clear();
+        self.spheres.clear();
+        self.elements.clear();
+        self.motions.clear();
+        self.kept = 0;
+    }
+
+    /// Sizes the state for `n` points, sets each element's motion since the last call (+∞ for
+    /// another model: other elements or another sphere count) and makes the model the reference
+    /// of the next call.
+    fn begin(&mut self, spheres: &[Sphere], elements: &[Element], n: usize) {
+        self.tracks.resize(n, Track::NONE);
+        self.kept = 0;
+        let same = self.spheres.len() == spheres.len() && self.elements == elements;
+        self.motions.clear();
+        self.motions.extend(elements.iter().map(|el| {
+            el.spheres()
+                .iter()
+                .map(|&i| {
+                    let i = i as usize;
+                    match (self.spheres.get(i), spheres.get(i)) {
+                        (Some(a), Some(b)) if same => {
+                            (a.center - b.center).norm() + (a.radius - b.radius).abs()
+                        }
+                        _ => f64::INFINITY,
+                    }
+                })
+                .fold(0.0, f64::max)
+        }));
+        self.spheres.clear();
+        self.spheres.extend_from_slice(spheres);
+        self.elements.clear();
+        self.elements.extend_from_slice(elements);
+    }
+}
+
+impl SphereMeshGeometry {
+    /// [`project_points`](Self::project_points) (Eq. 3.6) for a tracker that re-projects the
+    /// same data points every solver iteration: a point whose previous element is still nearer
+    /// than the previous margin, less the model's and the point's motion since, keeps it without
+    /// a search (module docs of `coherence.rs`); the others are searched from their previous
+    /// element. `out` is bit for bit what `project_points` returns, whatever `state` holds.
+    /// Allocates nothing once `state` has held as many points.
+    ///
+    /// # Panics
+    /// If `out.len() != points.len()`.
+    #[track_caller]
+    pub fn project_points_coherent(
+        &self,
+        points: &[Vector3<f64>],
+        state: &mut Coherence,
+        out: &mut [Option<Projection>],
+    ) {
+        assert_eq!(points.len(), out.len(), "one output slot per point");
+        state.begin(&self.spheres, &self.elements, points.len());
+        let mut kept = 0;
+        let max_motion = state.motions.iter().copied().fold(0.0, f64::max);
+        for ((p, o), track) in points.iter().zip(out.iter_mut()).zip(&mut state.tracks) {
+            let (pr, reused) = self.project_tracked(p, track, &state.motions, max_motion);
+            *o = pr;
+            kept += usize::from(reused);
+        }
+        state.kept = kept;
+    }
+
+    /// The plain projection of `p` given its memory `track` and the elements' `motions` since
+    /// `track` was set (`max_motion` the largest); updates `track` and says whether the search
+    /// was skipped.
+    #[inline]
+    fn project_tracked(
+        &self,
+        p: &Vector3<f64>,
+        track: &mut Track,
+        motions: &[f64],
+        max_motion: f64,
+    ) -> (Option<Projection>, bool) {
+        if !is_usable(p) {
+            *track = Track::NONE;
+            return (None, false);
+        }
+        let seed = track.element as usize;
+        let (first, pr) = match self.frames.get(seed) {
+            Some(frame) => (seed, frame.project(p)),
+            None => {
+                let Some(guess) = self.tree.guess(p) else {
+                    return (None, false);
+                };
+                (guess, self.frames[guess].project(p))
+            }
+        };
+        if first == seed {
+            let slack = ROUNDING * (1.0 + p.abs().max() + track.margin.abs());
+            let reach = track.margin - (p - track.point).norm() - slack;
+            // The largest motion of all elements first: in the late solver iterations it is
+            // small enough, and cheaper than the ball test.
+            let cheap = reach - max_motion;
+            let margin = if pr.distance < cheap {
+                cheap
+            } else {
+                reach - self.motion_within(p, reach, seed, motions)
+            };
+            if pr.distance < margin {
+                *track = Track {
+                    element: track.element,
+                    margin,
+                    point: *p,
+                };
+                return (Some(self.globalize(seed, pr)), true);
+            }
+        }
+        let search = self.search(p, first, pr.distance, MARGIN_GAP);
+        let (e, _) = search.nearest;
+        *track = Track {
+            element: e as u32,
+            margin: search.margin,
+            point: *p,
+        };
+        let pr = if e == first {
+            pr
+        } else {
+            self.frames[e].project(p)
+        };
+        (Some(self.globalize(e, pr)), false)
+    }
+
+    /// The largest motion of the elements other than `skip` whose bounding balls may come
+    /// within `reach` of `p` (the widened `f32` test of the search: a superset of them); 0 when
+    /// none, +∞ for an infinite `reach` bound that keeps them all.
+    #[inline]
+    fn motion_within(&self, p: &Vector3<f64>, reach: f64, skip: usize, motions: &[f64]) -> f64 {
+        if !reach.is_finite() {
+            return f64::INFINITY;
+        }
+        let query = self.blocks.query(p);
+        let mut worst: f64 = 0.0;
+        for block in 0..self.blocks.len() {
+            let mut mask = self.blocks.survivors(&query, block, reach);
+            let lanes = self.blocks.elements(block);
+            while mask != 0 {
+                let e = lanes[mask.trailing_zeros() as usize] as usize;
+                mask &= mask - 1;
+                if e != skip {
+                    // A padding lane (kept only on overflow) names no element: assume the worst.
+                    worst = worst.max(motions.get(e).copied().unwrap_or(f64::INFINITY));
+                }
+            }
+        }
+        worst
+    }
+}
