@@ -23,9 +23,11 @@
 //! honline's ω = 5 (was 10; `OnlineConfig::shape_prior` has the sweep) the IEKF's mean E_β
 //! over 15 draws is 0.37 / 0.54 / 0.91 / 1.13 mm at σ = 0.1 / 0.2 / 0.3 / 0.4 (targets ≤ 1.0 /
 //! ≤ 1.5 met; at ω = 10: 0.36 / 0.65 / 1.16 / 1.50); one draw at σ = 0.3 (seed 11) does not
-//! halve its E_β (3.22 → 1.77 mm: the middle finger's PIP/DIP joint lands misplaced, middle
-//! phalanx +12.7 mm, distal −8.1 mm), so "every draw converging" holds at σ ≤ 0.2 and 0.4 but
-//! not at 0.3 (14/15). Under ToF noise E_β ends above 1 mm even at σ = 0.1 (the radii come
+//! halve its E_β (3.22 → 1.77 mm), so "every draw converging" holds at σ ≤ 0.2 and 0.4 but
+//! not at 0.3 (14/15). That subject's middle fingertip is a club (distal radius 11.4 mm, middle
+//! phalanx 5.9 mm; template 7.0 / 8.0): within the first frames, while the belief is still
+//! vague, the estimate gives the middle phalanx's sphere the tip's bulk (radius 11.3 mm, length
+//! 26 → 29 mm) and shrinks the tip sphere to 3.7 mm, a swap that later frames never undo. Under ToF noise E_β ends above 1 mm even at σ = 0.1 (the radii come
 //! out thin); tracking with the online estimate does not come within 10 % of tracking with
 //! the true template (the CI tests guard the levels reached instead).
 

@@ -351,13 +351,13 @@ impl<'m> TrackingCtx<'m> {
                     )
                     .map_err(|_| TermError::Failed("invalid sensor camera"))?;
                 for hit in &self.hits {
+                    if sensor.hides(&hit.point) {
+                        continue;
+                    }
                     let (u, v) = (hit.pixel % camera.width, hit.pixel / camera.width);
                     let Some((nu, nv)) = sensor.nearest_pixel(u, v) else {
                         continue;
                     };
-                    if sensor.hides(&hit.point) {
-                        continue;
-                    }
                     let Some(pr) = self
                         .geometry
                         .project_on_element(hit.element as usize, &hit.point)
