@@ -1,24 +1,11 @@
 //! End-to-end checks of the `hands` binary: the demo, synth → convert round trips, model
 //! show/export, and clear errors (non-zero exit, a message naming the problem) on bad input.
 
-use std::path::PathBuf;
-use std::process::Command;
+mod common;
 
-fn hands(args: &[&str]) -> (bool, String) {
-    let out = Command::new(env!("CARGO_BIN_EXE_hands"))
-        .args(args)
-        .env("RUST_BACKTRACE", "0")
-        .output()
-        .expect("run hands");
-    (
-        out.status.success(),
-        format!(
-            "{}{}",
-            String::from_utf8_lossy(&out.stdout),
-            String::from_utf8_lossy(&out.stderr)
-        ),
-    )
-}
+use std::path::PathBuf;
+
+use common::hands;
 
 fn tmp(name: &str) -> PathBuf {
     let d = std::env::temp_dir().join(format!("hands-cli-{}-{name}", std::process::id()));
