@@ -87,6 +87,13 @@
 //! and solves ≈ 6 %. A cheaper re-check of a spent margin (evaluating only the elements that
 //! moved enough to matter instead of a full search) was tried and measured no gain; it is not
 //! kept.
+//!
+//! Re-measured on a quiet machine (nothing else running, pinned to one core with `taskset`,
+//! the speed9 binary against the one before it, alternated twice; the later build also has
+//! `OnlineConfig::shape_prior` 5 instead of 10, which changes values, not work): criterion
+//! online frame 7.12 / 7.12 → 6.30 / 6.26 ms (0.88×, ≈ 160 frames/s), plain sphere-mesh
+//! 6.37 / 6.46 → 5.69 / 5.64 ms (0.88×); in-process medians: correspondences 5 016 / 4 993 →
+//! 4 315 / 4 328 µs, solve 1 610 / 1 580 → 1 535 / 1 512 µs.
 
 #[path = "../tests/common/mod.rs"]
 mod common;
