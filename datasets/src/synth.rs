@@ -82,10 +82,21 @@ pub struct Synthesizer {
     thin: Vec<bool>,
     hand_elements: usize,
     wrist_bone: Option<usize>,
+    forearm_base: Option<[usize; 2]>,
 }
 
-/// Forearm in the wrist bone's frame: a pill from the wrist to mid-forearm (mm).
+/// Forearm in the wrist bone's frame for a template without named wrist spheres: a pill from
+/// the wrist to mid-forearm (mm).
 const FOREARM: [([f64; 3], f64); 2] = [([0.0, -40.0, 0.0], 21.0), ([0.0, -250.0, 3.0], 27.0)];
+/// The subject's own wrist spheres the forearm continues from (DESIGN.md template names).
+const WRIST_BASE: [&str; 2] = ["wrist_bottom_left", "wrist_bottom_right"];
+/// Far end of the subject-following forearm: offset from each wrist base sphere in the wrist
+/// bone's frame (mm) and radius growth. A real forearm continues the wrist's cross-section and
+/// widens gently toward the elbow; a fixed-size forearm is thicker than a thin subject's wrist
+/// right above the band, which no hand model can explain (measured: it moved the calibrated
+/// wrist of thin subjects 1.5–3 mm sideways).
+const FOREARM_REACH: [f64; 3] = [0.0, -200.0, 3.0];
+const FOREARM_GROWTH: f64 = 1.15;
 /// Wristband span along the wrist bone's y axis (mm).
 const BAND: [f64; 2] = [-85.0, -50.0];
 const SKIN: [f64; 3] = [222.0, 170.0, 138.0];
@@ -123,8 +134,19 @@ impl Synthesizer {
             .collect();
         let hand_elements = elements.len();
         let n = shaped.spheres.len() as u32;
+        let forearm_base = match WRIST_BASE.map(|name| shaped.sphere_index(name)) {
+            [Some(l), Some(r)] => Some([l, r]),
+            _ => None,
+        };
         if config.forearm {
-            elements.push(Element::Pill([n, n + 1]));
+            match forearm_base {
+                Some([l, r]) => {
+                    let (l, r) = (l as u32, r as u32);
+                    elements.push(Element::Wedge([l, r, n]));
+                    elements.push(Element::Wedge([r, n + 1, n]));
+                }
+                None => elements.push(Element::Pill([n, n + 1])),
+            }
         }
         let wrist_bone = shaped.skeleton.bone_index("wrist");
         Ok(Self {
@@ -141,6 +163,7 @@ impl Synthesizer {
             thin,
             hand_elements,
             wrist_bone,
+            forearm_base,
         })
     }
 
@@ -157,9 +180,21 @@ impl Synthesizer {
         let wrist_g = self.wrist_bone.map(|b| self.posed.skeleton.globals[b]);
         if self.config.forearm {
             let g = wrist_g.unwrap_or_default();
-            for (c, r) in FOREARM {
-                self.spheres
-                    .push(Sphere::new(g.transform_point(&Vector3::from(c)), r));
+            match self.forearm_base {
+                Some(base) => {
+                    let reach = g.transform_vector(&Vector3::from(FOREARM_REACH));
+                    for b in base {
+                        let s = self.posed.spheres[b];
+                        self.spheres
+                            .push(Sphere::new(s.center + reach, s.radius * FOREARM_GROWTH));
+                    }
+                }
+                None => {
+                    for (c, r) in FOREARM {
+                        self.spheres
+                            .push(Sphere::new(g.transform_point(&Vector3::from(c)), r));
+                    }
+                }
             }
         }
         self.renderer.render(

@@ -176,3 +176,95 @@ fn synthesis_is_deterministic() {
     assert_eq!(a.truth, b.truth);
     assert_ne!(a.frame.depth, c.frame.depth);
 }
+
+/// The forearm continues the subject's own wrist (its two lower wrist spheres): on random
+/// subjects, every pixel where the forearm is nearer than the hand alone lies below the wrist
+/// base along the wrist bone, so the subject's true template explains all the skin above the
+/// band (a fixed-size forearm was thicker than a thin subject's wrist there).
+#[test]
+fn forearm_adds_nothing_above_the_wrist_base() {
+    use hand_model::spheremesh::PosedSphereMesh;
+    let template = default_right_hand();
+    let motion = MotionLibrary::by_name_for("teaser", 3, &template.skeleton).expect("motion");
+    let cam = Camera::sr300_qvga();
+    let wrist = template.skeleton.bone_index("wrist").expect("wrist bone");
+    let base = template
+        .sphere_index("wrist_bottom_left")
+        .expect("wrist base");
+    for seed in 1..=4 {
+        let subject = datasets::Subject::random(seed, 0.15).expect("subject");
+        let render = |forearm: bool, t: f64| {
+            let config = SceneConfig {
+                forearm,
+                wall_mm: None,
+                ..Default::default()
+            };
+            let mut s = Synthesizer::new(&template, &subject.beta, config).expect("synth");
+            let pose = motion.pose_at(t);
+            let frame = s.render(0, t, &pose).expect("render");
+            let posed = PosedSphereMesh::new(s.template(), &pose);
+            (frame, posed)
+        };
+        for t in [0.5, 2.0, 4.0] {
+            let (with, posed) = render(true, t);
+            let (without, _) = render(false, t);
+            let g = posed.skeleton.globals[wrist].inverse();
+            let base_y = g.transform_point(&posed.spheres[base].center).y;
+            let mut covered = 0;
+            for (i, (&a, &b)) in with
+                .frame
+                .depth
+                .data
+                .iter()
+                .zip(&without.frame.depth.data)
+                .enumerate()
+            {
+                if a == 0 || (b > 0 && a + 1 >= b) {
+                    continue;
+                }
+                covered += 1;
+                let (u, v) = ((i as u32 % cam.width) as f64, (i as u32 / cam.width) as f64);
+                let y = g.transform_point(&cam.backproject(u, v, a as f64)).y;
+                assert!(
+                    y < base_y + 1.0,
+                    "subject {seed}, t {t}: forearm pixel {y:.1} mm along the wrist bone, base at {base_y:.1}"
+                );
+            }
+            assert!(
+                covered > 200,
+                "subject {seed}: the forearm covers {covered} px"
+            );
+        }
+    }
+}
+
+/// The depth noise measured from the data alone (`sensor_io::preprocess::depth_noise`) agrees
+/// with the sensor model that made it: ToF's σ(z) = 1 mm + 2.5e-5·z² at the hand's depth, and
+/// below 1 mm for the noise-free (millimetre-quantized) model.
+#[test]
+fn measured_depth_noise_matches_the_sensor_model() {
+    use sensor_io::preprocess::depth_noise;
+    let cam = Camera::sr300_qvga();
+    let clean = frame_at(SensorModel::NoiseFree, 1.0, 2);
+    let clean_sigma = depth_noise(&clean.frame.depth, &hand_mask(&clean, &cam)).expect("σ");
+    assert!(clean_sigma < 1.0, "noise-free: {clean_sigma}");
+    let tof = SensorModel::by_name("tof").expect("tof");
+    let f = frame_at(tof, 1.0, 2);
+    let mask = hand_mask(&f, &cam);
+    let sigma = depth_noise(&f.frame.depth, &mask).expect("σ");
+    let depths: Vec<f64> = f
+        .frame
+        .depth
+        .data
+        .iter()
+        .zip(&mask.data)
+        .filter(|&(&d, &m)| m == 1 && d > 0)
+        .map(|(&d, _)| f64::from(d))
+        .collect();
+    let z = depths.iter().sum::<f64>() / depths.len() as f64;
+    let expected = 1.0 + 2.5e-5 * z * z;
+    assert!(
+        (sigma - expected).abs() < 0.25 * expected,
+        "ToF at {z:.0} mm: measured σ {sigma:.2}, model {expected:.2}"
+    );
+}

@@ -4,22 +4,30 @@
 //! that run — recovers the subject's rest sphere centers and radii, and tracking the teaser
 //! with the calibrated template comes close to tracking with the true one.
 //!
-//! Measured (robust d2m at 1 mm, model points hidden by the wristband not pushed by m2d):
-//! centers 0.40–1.16 mm and radii 0.06–0.21 mm on the five subjects (least squares with
-//! every model pixel pushed: 0.53–1.25 and 0.07–0.36 mm). Tracking the noise-free teaser with
-//! the calibrated template: 0.31–0.57 mm mean keypoint error against 0.17–0.26 mm with the
-//! true template and 2.5–9 mm with the default one — the issue's "within 10 %" of a 0.2 mm
-//! error is not reached (ratios 1.7–2.4); the worst centers are the wrist's, whose far end
-//! the band hides and whose sides the rendered forearm covers.
+//! Measured (robust d2m at 1 mm, model points hidden by the wristband not pushed by m2d, the
+//! rendered forearm continuing each subject's own wrist, the LM damping floored): centers
+//! 0.22–0.82 mm and radii 0.03–0.11 mm on the five subjects. Tracking the noise-free teaser
+//! with the calibrated template: 0.23 / 0.24 / 0.25 / 0.26 / 0.23 mm mean keypoint error
+//! against 0.17 / 0.25 / 0.35 / 0.18 / 0.25 mm with the true template (ratios 1.39 / 0.98 /
+//! 0.72 / 1.38 / 0.93) and 2.5–8.8 mm with the default one — "within 10 %" holds on subjects
+//! 2, 3 and 5, not on 1 and 4.
 //!
-//! Where the excess comes from (subjects 1 and 3; the test prints each subject's largest
-//! per-keypoint excess): calibrating from the TRUE template with the TRUE poses of the same 8
-//! frames still ends 0.34 / 0.63 mm from the truth (teaser ratios 2.0 / 1.28), so the floor is
-//! the energy's minimum, not the start. The rendered forearm is a fixed pill, thicker than a
-//! thin subject's wrist; the wrist spheres fit it and shift 1.5–3 mm sideways against the palm
-//! (through the asymmetric wrist-width β), which moves the tracked wrist keypoint (the wrist
-//! bone's origin) by 1.1–1.5 mm against 0.09 mm with the true template; the pinky joints
-//! (+0.5–0.7 mm) and the thumb's IP joint (+0.3 mm) carry most of the rest.
+//! Where the excess came from and what changed:
+//! - The rendered forearm was a fixed pill, thicker than a thin subject's wrist just above the
+//!   band; the wrist spheres fitted it and shifted 1.5–3 mm sideways, moving the tracked wrist
+//!   keypoint by 1.0–3.2 mm (ratios up to 2.45). The forearm now continues the subject's own
+//!   lower wrist spheres (`datasets::synth`), so the true template explains all the skin above
+//!   the band.
+//! - Subject 3's descent stalled at 14 iterations: its ring DIP angle in one frame was barely
+//!   seen (near-zero diagonal) and Marquardt's diagonal scaling let it step to 25 rad into its
+//!   joint limit whatever λ; the damping diagonal is now floored (ratio 2.75 → 0.72).
+//! - Subjects 1 and 4 end in a local minimum of the energy: started from the true template and
+//!   true poses of the same frames, subject 1 stays at the truth (energy 21 105 against 21 269
+//!   reached from the default template) and subject 4 drifts 0.15 mm (ratio 1.33). More
+//!   iterations (100), a tighter tolerance, least squares instead of the Huber d2m, a weaker
+//!   rest-rotation prior or two more rounds of re-tracking and re-calibrating did not lower
+//!   the ratios below 1.34. The wrist's lower spheres lie under the band (2.3–7.8 mm off, no
+//!   data sees them).
 
 use eval::synthetic::{SyntheticRun, SyntheticSequence, SyntheticSpec};
 use hand_model::kinematics::Pose;
@@ -171,7 +179,7 @@ fn calibrates_random_subjects_from_eight_tracked_frames() {
     );
     assert!(worst.0 < 1.5 && worst.1 < 1.0, "{worst:?}");
     assert!(
-        worst.2 < 3.0,
+        worst.2 < 1.6,
         "calibrated/true teaser error ratio {:.2}",
         worst.2
     );
@@ -179,7 +187,9 @@ fn calibrates_random_subjects_from_eight_tracked_frames() {
 
 /// The same with the ToF noise model (issue 6 "With ToF noise: report"): two subjects; the
 /// calibrated template must still be closer to the truth than the default. Measured: centers
-/// 5.55 → 3.47 and 2.63 → 2.35 mm (radii 0.26 → 0.93, 0.48 → 0.85 mm: the noise thins them).
+/// 5.55 → 3.48 and 2.63 → 2.02 mm (radii 0.26 → 0.88, 0.48 → 0.91 mm: the noise thins them),
+/// with the priors scaled by the measured noise (`CalibrationConfig::noise_scaled_priors`;
+/// without: 3.63 and 2.88 mm, subject 2 worse than the default template).
 #[test]
 fn calibration_with_tof_noise() {
     let base = default_right_hand();

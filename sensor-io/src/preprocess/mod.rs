@@ -1,15 +1,18 @@
 //! Per-frame preprocessing (thesis §2.2 "Preprocessing", Fig. 2.5; §3.6 "Downsampling";
 //! Taylor et al. 2016 §3.4): median downsampling, range clipping, hand segmentation (wristband or
 //! depth-only), normals from the depth image, point subsampling, and the silhouette's distance
-//! transform, assembled by [`Preprocessor`].
+//! transform, assembled by [`Preprocessor`]; the depth noise measured from the data
+//! ([`depth_noise`]).
 
 mod downsample;
+mod noise;
 mod normals;
 mod pipeline;
 mod segment;
 mod subsample;
 
 pub use downsample::{clip_range, median_downsample};
+pub use noise::depth_noise;
 pub use normals::depth_normals;
 pub use pipeline::{PreprocessConfig, PreprocessedFrame, Preprocessor, Segmentation, Subsampling};
 pub use segment::{
