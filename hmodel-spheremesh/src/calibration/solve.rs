@@ -52,6 +52,49 @@ pub struct CalibrationFrame {
     /// over every rendered model pixel, the d2m term over the subsampled points, so τ_m2d is
     /// scaled by it to keep the thesis' balance of the two sums over whole pixel sets.
     pub sampling: f64,
+    /// A kd-tree over `points` for the nearest-point queries of a cloud's m2d (`None` for
+    /// depth frames, whose m2d uses the silhouette).
+    tree: Option<CloudTree>,
+}
+
+/// A kd-tree over a cloud's points (kiddo; a scan holds ~5000 points and the m2d queries a few
+/// hundred model samples per frame and iteration).
+#[derive(Clone)]
+struct CloudTree {
+    tree: std::sync::Arc<kiddo::ImmutableKdTree<f64, 3>>,
+    /// The number of points it was built over: a frame whose points were replaced since
+    /// falls back to the brute-force search.
+    len: usize,
+}
+
+impl std::fmt::Debug for CloudTree {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str("CloudTree")
+    }
+}
+
+impl CloudTree {
+    fn new(points: &[Vector3<f64>]) -> Option<Self> {
+        let items: Vec<[f64; 3]> = points.iter().map(|p| [p.x, p.y, p.z]).collect();
+        let tree = kiddo::ImmutableKdTree::new_from_slice(&items).ok()?;
+        Some(Self {
+            tree: std::sync::Arc::new(tree),
+            len: points.len(),
+        })
+    }
+
+    /// The point of `points` nearest to `q` (the points the tree was built over).
+    fn nearest(&self, points: &[Vector3<f64>], q: &Vector3<f64>) -> Option<Vector3<f64>> {
+        if points.len() != self.len {
+            return nearest_point(points, q);
+        }
+        let hit = self
+            .tree
+            .query(&[q.x, q.y, q.z])
+            .nearest_one::<kiddo::SquaredEuclidean<f64>>()
+            .execute();
+        points.get(hit.item as usize).copied()
+    }
 }
 
 impl CalibrationFrame {
@@ -69,12 +112,19 @@ impl CalibrationFrame {
             } else {
                 1.0
             },
+            tree: None,
         }
     }
 
     /// A complete point cloud.
     pub fn cloud(points: Vec<Vector3<f64>>) -> Self {
+        let finite = points.iter().all(|p| p.iter().all(|v| v.is_finite()));
         Self {
+            tree: if finite {
+                CloudTree::new(&points)
+            } else {
+                None
+            },
             points,
             sensor: SensorView::default(),
             kind: FrameKind::Cloud,
@@ -462,7 +512,11 @@ impl Problem<'_> {
                 let samples = surface_samples(ctx.geometry());
                 let w = self.config.m2d * frame.points.len() as f64 / samples.len().max(1) as f64;
                 for q in &samples {
-                    let Some(p) = nearest_point(&frame.points, &q.point) else {
+                    let nearest = match &frame.tree {
+                        Some(tree) => tree.nearest(&frame.points, &q.point),
+                        None => nearest_point(&frame.points, &q.point),
+                    };
+                    let Some(p) = nearest else {
                         continue;
                     };
                     let d = q.point - p;
@@ -751,8 +805,7 @@ fn any_perpendicular(v: &Vector3<f64>) -> Vector3<f64> {
         .unwrap_or_else(Vector3::z)
 }
 
-/// The point of `points` nearest to `q` (brute force: a scan has ~5000 points and a model a few
-/// hundred samples, a few ms per frame and iteration offline).
+/// The point of `points` nearest to `q` by brute force (the reference of [`CloudTree`]).
 fn nearest_point(points: &[Vector3<f64>], q: &Vector3<f64>) -> Option<Vector3<f64>> {
     points
         .iter()
@@ -1069,6 +1122,31 @@ fn restrict(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The kd-tree's nearest point equals the brute-force search's on a random cloud.
+    #[test]
+    fn cloud_tree_finds_the_brute_force_nearest_point() {
+        use rand::{Rng, SeedableRng};
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(4);
+        let mut v = || {
+            Vector3::new(
+                rng.random_range(-80.0..80.0),
+                rng.random_range(-80.0..80.0),
+                rng.random_range(300.0..420.0),
+            )
+        };
+        let points: Vec<Vector3<f64>> = (0..3000).map(|_| v()).collect();
+        let frame = CalibrationFrame::cloud(points.clone());
+        let tree = frame.tree.as_ref().expect("a tree");
+        for _ in 0..500 {
+            let q = v();
+            assert_eq!(tree.nearest(&frame.points, &q), nearest_point(&points, &q));
+        }
+        // A frame whose points were replaced after the tree was built falls back.
+        let shorter = &points[..100];
+        let q = v();
+        assert_eq!(tree.nearest(shorter, &q), nearest_point(shorter, &q));
+    }
 
     /// An unknown the data barely sees (a near-zero diagonal) still takes a bounded step once
     /// λ is large: the damping diagonal is floored relative to the largest entry.
