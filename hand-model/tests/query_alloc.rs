@@ -1,6 +1,6 @@
 //! The per-iteration queries allocate nothing: `update`, `project_points` and
-//! `project_points_front_facing` (seeded, coherent or neither) run under a counting global
-//! allocator.
+//! `project_points_front_facing` (seeded, coherent or neither) and the per-frame
+//! `Coherence::carry_to_pixels` run under a counting global allocator.
 // Implementing `GlobalAlloc` needs `unsafe`; it only forwards to the system allocator.
 #![allow(unsafe_code)]
 
@@ -53,6 +53,11 @@ fn per_iteration_queries_do_not_allocate() {
     let mut seeds = vec![hand_model::query::NO_SEED; points.len()];
     // A coherent state sized by a first call (the only one that allocates).
     let mut coherence = hand_model::query::Coherence::default();
+    let pixels: Vec<u32> = (0..points.len() as u32).map(|i| 2 * i).collect();
+    coherence.carry_to_pixels(&pixels, 64, 4 * points.len() as u32 / 64 + 1);
+    g.project_points_coherent(&points, &mut coherence, &mut out);
+    // Carried once, so that its scratch is sized.
+    coherence.carry_to_pixels(&pixels, 64, 4 * points.len() as u32 / 64 + 1);
     g.project_points_coherent(&points, &mut coherence, &mut out);
     let views = [
         View::Orthographic(Vector3::z()),
@@ -64,6 +69,7 @@ fn per_iteration_queries_do_not_allocate() {
     // This file holds a single test, so nothing else allocates while it runs.
     let before = ALLOCATIONS.load(Ordering::SeqCst);
     g.update(&moved).unwrap();
+    coherence.carry_to_pixels(&pixels, 64, 4 * points.len() as u32 / 64 + 1);
     g.project_points(&points, &mut out);
     g.project_points_seeded(&points, &mut seeds, &mut out);
     g.project_points_coherent(&points, &mut coherence, &mut out);

@@ -53,6 +53,14 @@ pub struct Coherence {
     motions: Vec<f64>,
     /// How many points of the last call kept their element without a search.
     kept: usize,
+    /// The image pixel of each track's point when the tracks were carried by pixel
+    /// ([`Coherence::carry_to_pixels`]); empty otherwise.
+    pixels: Vec<u32>,
+    /// Scratch of the carry: per image pixel, 1 + the index of the old track there (0: none);
+    /// all zero between carries.
+    by_pixel: Vec<u32>,
+    /// Scratch of the carry: the new tracks.
+    carried: Vec<Track>,
 }
 
 /// One point's memory.
@@ -65,6 +73,18 @@ struct Track {
     /// The point the margin is for.
     point: Vector3<f64>,
 }
+
+/// The 8 pixels around a pixel, the 4 edge neighbours (nearer) first, each group in row order.
+const NEIGHBOURS: [(isize, isize); 8] = [
+    (0, -1),
+    (-1, 0),
+    (1, 0),
+    (0, 1),
+    (-1, -1),
+    (1, -1),
+    (-1, 1),
+    (1, 1),
+];
 
 impl Track {
     const NONE: Self = Self {
@@ -83,11 +103,73 @@ impl Coherence {
 
     /// Forgets every point (the next call searches them all in full).
     pub fn clear(&mut self) {
+        self.pixels.clear();
         self.tracks.clear();
         self.spheres.clear();
         self.elements.clear();
         self.motions.clear();
         self.kept = 0;
+    }
+
+    /// Hands the memory of the last call's points over to the points of a new frame, matched by
+    /// image pixel: `pixels[i]` is the linear pixel index (`v · width + u`, `u < width`,
+    /// `v < height`) of the new `i`-th point, and it inherits the track of the old point at the
+    /// same pixel or, failing that, at the nearest of the 8 pixels around it (the first in row
+    /// order among equals). The old points' pixels are those of the previous carry; without
+    /// one (the state was filled after [`Coherence::clear`] or never carried) every track is
+    /// forgotten. Points with a pixel outside the image inherit nothing.
+    ///
+    /// Any inherited track is sound: its margin is reduced by how far the new point lies from
+    /// the old one and by the motion of the model since (module docs), so the next call's
+    /// projections are bit for bit the plain ones whatever the match; a close match (the same
+    /// surface point seen again one frame later) only lets more points skip their search in
+    /// the first solver iteration of the frame, which otherwise searches every point. Allocates
+    /// nothing once the state has held as many points and an image as large.
+    pub fn carry_to_pixels(&mut self, pixels: &[u32], width: u32, height: u32) {
+        let (w, h) = (width as usize, height as usize);
+        let size = w * h;
+        let valid = self.pixels.len() == self.tracks.len()
+            && self.pixels.iter().all(|&k| (k as usize) < size);
+        self.carried.clear();
+        if valid && !self.pixels.is_empty() {
+            if self.by_pixel.len() < size {
+                self.by_pixel.resize(size, 0);
+            }
+            for (i, &k) in self.pixels.iter().enumerate() {
+                // A repeated pixel keeps its first point.
+                let slot = &mut self.by_pixel[k as usize];
+                if *slot == 0 {
+                    *slot = i as u32 + 1;
+                }
+            }
+            let by_pixel = &self.by_pixel;
+            let tracks = &self.tracks;
+            let at = |u: isize, v: isize| -> Option<Track> {
+                if u < 0 || v < 0 || u as usize >= w || v as usize >= h {
+                    return None;
+                }
+                let i = by_pixel[v as usize * w + u as usize];
+                (i != 0).then(|| tracks[i as usize - 1])
+            };
+            self.carried.extend(pixels.iter().map(|&k| {
+                let k = k as usize;
+                if k >= size {
+                    return Track::NONE;
+                }
+                let (u, v) = ((k % w) as isize, (k / w) as isize);
+                at(u, v)
+                    .or_else(|| NEIGHBOURS.iter().find_map(|&(du, dv)| at(u + du, v + dv)))
+                    .unwrap_or(Track::NONE)
+            }));
+            for &k in &self.pixels {
+                self.by_pixel[k as usize] = 0;
+            }
+        } else {
+            self.carried.resize(pixels.len(), Track::NONE);
+        }
+        std::mem::swap(&mut self.tracks, &mut self.carried);
+        self.pixels.clear();
+        self.pixels.extend_from_slice(pixels);
     }
 
     /// Sizes the state for `n` points, sets each element's motion since the last call (+∞ for
@@ -140,6 +222,7 @@ impl SphereMeshGeometry {
         state.begin(&self.spheres, &self.elements, points.len());
         let mut kept = 0;
         let max_motion = state.motions.iter().copied().fold(0.0, f64::max);
+
         for ((p, o), track) in points.iter().zip(out.iter_mut()).zip(&mut state.tracks) {
             let (pr, reused) = self.project_tracked(p, track, &state.motions, max_motion);
             *o = pr;
