@@ -400,7 +400,8 @@ fn coherence_carried_by_pixels_equals_fresh_queries() {
             state.carry_to_pixels(&pixels_a, width, height);
             assert_eq!(project(&g, &scene.points, &mut state, &mut out), 0);
             for t in [0.05, 0.1] {
-                g.update(&blend(&scene.previous, &scene.spheres, t)).unwrap();
+                g.update(&blend(&scene.previous, &scene.spheres, t))
+                    .unwrap();
                 project(&g, &scene.points, &mut state, &mut out);
             }
             // The next frame, the model moved on.
@@ -411,7 +412,11 @@ fn coherence_carried_by_pixels_equals_fresh_queries() {
             state.carry_to_pixels(&pixels_b, width, height);
             let carried = project(&g, &points_b, &mut state, &mut out);
             assert_eq!(cold, 0);
-            assert!(carried > n / 5, "{} {front_facing}: {carried} of {n}", scene.name);
+            assert!(
+                carried > n / 5,
+                "{} {front_facing}: {carried} of {n}",
+                scene.name
+            );
             // Carried on once more, to frame A's pixels and points.
             state.carry_to_pixels(&pixels_a, width, height);
             g.update(&scene.spheres).unwrap();

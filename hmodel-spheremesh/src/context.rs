@@ -638,7 +638,8 @@ mod tests {
         let mut ctx = TrackingCtx::new(&t, view, IrlsParams::default()).unwrap();
         ctx.set_frame(&frames[0]);
         for k in 0..4 {
-            ctx.update(&at(0.3 + 0.01 * f64::from(k), 0.5), false).unwrap();
+            ctx.update(&at(0.3 + 0.01 * f64::from(k), 0.5), false)
+                .unwrap();
         }
         for (frame, carried) in [(&frames[1], true), (&without_pixels, false)] {
             ctx.set_frame(frame);
