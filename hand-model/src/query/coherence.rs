@@ -22,6 +22,7 @@
 
 use super::bounding::BLOCK;
 use super::geometry::SphereMeshGeometry;
+use super::union_silhouette::UnionSilhouette;
 use super::{is_usable, Projection, NO_SEED};
 use crate::shape::{Element, Sphere};
 use nalgebra::Vector3;
@@ -38,8 +39,10 @@ const ROUNDING: f64 = 1e-9;
 /// The per-point memory of [`SphereMeshGeometry::project_points_coherent`] and
 /// [`SphereMeshGeometry::project_points_front_facing_coherent`] between calls: the winning
 /// element of each point's last search and how far every other element was, with the spheres
-/// and points that held for. Build it empty with [`Coherence::default`]; the calls size it and
-/// allocate nothing once it has held as many points and spheres.
+/// and points that held for; also the storage of the front-facing calls' object-space
+/// silhouette, rebuilt in place per call. Build it empty with [`Coherence::default`]; the calls
+/// size it and allocate nothing once it has held as many points and spheres (and, for the
+/// front-facing calls, once one of them has needed a silhouette).
 ///
 /// The state only saves work: whatever it holds (another model, other points, stale
 /// answers), the projections are bit for bit those of
@@ -65,6 +68,9 @@ pub struct Coherence {
     by_pixel: Vec<u32>,
     /// Scratch of the carry: the new tracks.
     carried: Vec<Track>,
+    /// The object-space silhouette of the front-facing calls, rebuilt in place per call
+    /// (allocated by the first call that needs one).
+    pub(super) silhouette: Option<Box<UnionSilhouette>>,
 }
 
 /// One point's memory.
