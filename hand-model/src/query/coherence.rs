@@ -20,7 +20,6 @@
 //! [`SphereMeshGeometry::search`]): the margin is then the second smallest distance, capped at
 //! the minimum plus the gap. The answers are bit for bit those of the plain search.
 
-use super::bounding::BLOCK;
 use super::geometry::SphereMeshGeometry;
 use super::union_silhouette::UnionSilhouette;
 use super::{is_usable, Projection, NO_SEED};
@@ -55,9 +54,6 @@ pub struct Coherence {
     elements: Vec<Element>,
     /// Per element its motion `δ_e` since the last call (+∞ after a change of model).
     motions: Vec<f64>,
-    /// The motions again per lane of the geometry's culling blocks (+∞ on padding lanes), for
-    /// the branch-free maximum over a block's surviving lanes.
-    lane_motions: Vec<[f64; BLOCK]>,
     /// How many points of the last call kept their element without a search.
     kept: usize,
     /// The image pixel of each track's point when the tracks were carried by pixel
@@ -115,7 +111,6 @@ impl Coherence {
     pub fn clear(&mut self) {
         self.pixels.clear();
         self.tracks.clear();
-        self.lane_motions.clear();
         self.spheres.clear();
         self.elements.clear();
         self.motions.clear();
@@ -233,35 +228,21 @@ impl SphereMeshGeometry {
         state.begin(&self.spheres, &self.elements, points.len());
         let mut kept = 0;
         let max_motion = state.motions.iter().copied().fold(0.0, f64::max);
-        state.lane_motions.clear();
-        state
-            .lane_motions
-            .extend((0..self.blocks.len()).map(|block| {
-                let lanes = self.blocks.elements(block);
-                // A padding lane (kept only on overflow) names no element: assume the worst.
-                core::array::from_fn(|l| {
-                    state
-                        .motions
-                        .get(lanes[l] as usize)
-                        .copied()
-                        .unwrap_or(f64::INFINITY)
-                })
-            }));
         for ((p, o), track) in points.iter().zip(out.iter_mut()).zip(&mut state.tracks) {
-            kept += usize::from(self.project_tracked(p, track, &state.lane_motions, max_motion, o));
+            kept += usize::from(self.project_tracked(p, track, &state.motions, max_motion, o));
         }
         state.kept = kept;
     }
 
     /// The plain projection of `p` into `out` given its memory `track` and the elements'
-    /// motions since `track` was set (per lane of the culling blocks, `lane_motions`;
-    /// `max_motion` the largest); updates `track` and says whether the search was skipped.
+    /// `motions` since `track` was set (`max_motion` the largest); updates `track` and says
+    /// whether the search was skipped.
     #[inline]
     fn project_tracked(
         &self,
         p: &Vector3<f64>,
         track: &mut Track,
-        lane_motions: &[[f64; BLOCK]],
+        motions: &[f64],
         max_motion: f64,
         out: &mut Option<Projection>,
     ) -> bool {
@@ -290,7 +271,7 @@ impl SphereMeshGeometry {
             let margin = if pr.distance < cheap {
                 cheap
             } else {
-                reach - self.motion_within(p, reach, seed, lane_motions)
+                reach - self.motion_within(p, reach, seed, motions)
             };
             if pr.distance < margin {
                 *track = Track {
@@ -321,31 +302,23 @@ impl SphereMeshGeometry {
     /// The largest motion of the elements other than `skip` whose bounding balls may come
     /// within `reach` of `p` (the widened `f32` test of the search: a superset of them); 0 when
     /// none, +∞ for an infinite `reach` bound that keeps them all.
-    ///
-    /// The maximum is taken lane-wise over each block with a surviving lane (`lane_motions`,
-    /// the motions per lane, padding lanes +∞), without a branch per survivor.
     #[inline]
-    fn motion_within(
-        &self,
-        p: &Vector3<f64>,
-        reach: f64,
-        skip: usize,
-        lane_motions: &[[f64; BLOCK]],
-    ) -> f64 {
+    fn motion_within(&self, p: &Vector3<f64>, reach: f64, skip: usize, motions: &[f64]) -> f64 {
         if !reach.is_finite() {
             return f64::INFINITY;
         }
         let query = self.blocks.query(p);
         let mut worst: f64 = 0.0;
-        for (block, motions) in lane_motions.iter().enumerate().take(self.blocks.len()) {
-            let mask = self.blocks.survivors(&query, block, reach);
-            if mask == 0 {
-                continue;
-            }
+        for block in 0..self.blocks.len() {
+            let mut mask = self.blocks.survivors(&query, block, reach);
             let lanes = self.blocks.elements(block);
-            for (l, (&e, &m)) in lanes.iter().zip(motions).enumerate() {
-                let counts = (mask >> l) & 1 != 0 && e as usize != skip;
-                worst = worst.max(if counts { m } else { 0.0 });
+            while mask != 0 {
+                let e = lanes[mask.trailing_zeros() as usize] as usize;
+                mask &= mask - 1;
+                if e != skip {
+                    // A padding lane (kept only on overflow) names no element: assume the worst.
+                    worst = worst.max(motions.get(e).copied().unwrap_or(f64::INFINITY));
+                }
             }
         }
         worst
