@@ -114,22 +114,23 @@
 //! kept points at ≈ 85 ns), the front-facing substitutes ≈ 0.5 ms (≈ 50 back-facing points at
 //! ≈ 9 µs each: silhouette clipping and crease searches), the m2d render ≈ 0.8 ms (≈ 2 300 rays
 //! per frame, 90 % of them missing), the shape rows ≈ 0.7 ms, the Cholesky factorizations
-//! ≈ 0.4 ms. The build machine was shared throughout (load 2–4 on 2 cores) and wall-clock
-//! timings varied by ±25 % from run to run; the least disturbed alternating runs (one core,
-//! medians, µs):
+//! ≈ 0.4 ms. The build machine was shared throughout (load 2–4 on 2 cores, the other core
+//! busy) and wall-clock timings varied by ±25 % from run to run; the least disturbed runs of
+//! the binaries before and after, pinned to the free core (µs; "before" also from a quiet
+//! moment at the start of the session):
 //!
 //! | median (µs)                     | before        | after         | after / before |
 //! |---------------------------------|---------------|---------------|----------------|
-//! | criterion, whole frame          | 6 410         | 6 030–6 450   | ≈ 0.94–1.0     |
-//! | `track` (in-process, stages)    | 6 290–6 330   | 5 940–6 190   | ≈ 0.95         |
-//! | `correspondences`               | 4 310–4 360   | 4 010–4 160   | ≈ 0.94         |
-//! | `solve` (terms, factorization)  | 1 520–1 550   | 1 450–1 500   | ≈ 0.96         |
-//! | `filter`                        | 253–254       | 254–282       | 1.00           |
-//! | `track`, plain sphere-mesh      | 5 670         | 5 400–5 530   | ≈ 0.96         |
+//! | criterion, whole frame          | 6 410–6 860   | 6 440–6 520   | ≈ 0.95–1.0     |
+//! | `track` (in-process, stages)    | 6 290–6 610   | 5 940–6 010   | ≈ 0.90–0.95    |
+//! | `correspondences`               | 4 310–4 500   | 4 010–4 070   | ≈ 0.90–0.93    |
+//! | `solve` (terms, factorization)  | 1 520–1 600   | 1 430–1 470   | ≈ 0.90–0.95    |
+//! | `filter`                        | 253–256       | 254–256       | 1.00           |
+//! | `track`, plain sphere-mesh      | 5 670–5 840   | 5 350–5 540   | ≈ 0.92–0.95    |
 //!
-//! ≈ 160–170 frames/s: the goal of 200 frames/s (5 ms) is **still not met**. CPU-time samples
-//! (`perf`, the same 600 frames) moved by less than their run-to-run noise (±4 %) on the loaded
-//! machine; the gains above want re-measuring on a quiet one.
+//! ≈ 165 frames/s in-process (≈ 155 by criterion): the goal of 200 frames/s (5 ms) is **still
+//! not met**. CPU-time samples (`perf`, the same 600 frames) moved by less than their
+//! run-to-run noise (±4 %) on the loaded machine: the gains want re-measuring on a quiet one.
 
 #[path = "../tests/common/mod.rs"]
 mod common;
