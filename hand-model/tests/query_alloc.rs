@@ -1,6 +1,6 @@
 //! The per-iteration queries allocate nothing: `update`, `project_points` and
-//! `project_points_front_facing` (seeded, coherent or neither) run under a counting global
-//! allocator.
+//! `project_points_front_facing` (seeded, coherent or neither) and the per-frame
+//! `Coherence::carry_to_pixels` run under a counting global allocator.
 // Implementing `GlobalAlloc` needs `unsafe`; it only forwards to the system allocator.
 #![allow(unsafe_code)]
 
@@ -39,7 +39,7 @@ fn per_iteration_queries_do_not_allocate() {
         .iter()
         .map(|s| hand_model::shape::Sphere::new(s.center + Vector3::new(1.0, -2.0, 0.5), s.radius))
         .collect();
-    let points: Vec<Vector3<f64>> = (0..500)
+    let mut points: Vec<Vector3<f64>> = (0..500)
         .map(|i| {
             let t = i as f64 * 0.37;
             Vector3::new(
@@ -49,10 +49,21 @@ fn per_iteration_queries_do_not_allocate() {
             )
         })
         .collect();
+    // And points behind each sphere (+z, away from both views): back-facing footpoints.
+    points.extend(
+        spheres
+            .iter()
+            .map(|s| s.center + Vector3::new(0.0, 0.0, s.radius + 3.0)),
+    );
     let mut out = vec![None; points.len()];
     let mut seeds = vec![hand_model::query::NO_SEED; points.len()];
     // A coherent state sized by a first call (the only one that allocates).
     let mut coherence = hand_model::query::Coherence::default();
+    let pixels: Vec<u32> = (0..points.len() as u32).map(|i| 2 * i).collect();
+    coherence.carry_to_pixels(&pixels, 64, 4 * points.len() as u32 / 64 + 1);
+    g.project_points_coherent(&points, &mut coherence, &mut out);
+    // Carried once, so that its scratch is sized.
+    coherence.carry_to_pixels(&pixels, 64, 4 * points.len() as u32 / 64 + 1);
     g.project_points_coherent(&points, &mut coherence, &mut out);
     let views = [
         View::Orthographic(Vector3::z()),
@@ -60,10 +71,13 @@ fn per_iteration_queries_do_not_allocate() {
             camera_center: Vector3::new(0.0, 50.0, -400.0),
         },
     ];
+    // The coherent state keeps the silhouette of the front-facing calls (allocated once).
+    g.project_points_front_facing_coherent(&points, &views[0], &mut coherence, &mut out);
 
     // This file holds a single test, so nothing else allocates while it runs.
     let before = ALLOCATIONS.load(Ordering::SeqCst);
     g.update(&moved).unwrap();
+    coherence.carry_to_pixels(&pixels, 64, 4 * points.len() as u32 / 64 + 1);
     g.project_points(&points, &mut out);
     g.project_points_seeded(&points, &mut seeds, &mut out);
     g.project_points_coherent(&points, &mut coherence, &mut out);
@@ -74,6 +88,11 @@ fn per_iteration_queries_do_not_allocate() {
     }
     let single = g.project_front_facing(&points[0], &views[0]);
     let after = ALLOCATIONS.load(Ordering::SeqCst);
+    // Some footpoints were back-facing (the silhouette was built): substitutes differ from the
+    // plain projections.
+    let mut plain = vec![None; points.len()];
+    g.project_points(&points, &mut plain);
+    assert!(out.iter().zip(&plain).any(|(a, b)| a != b));
     assert!(single.is_some() && out.iter().all(Option::is_some));
     assert_eq!(
         after - before,

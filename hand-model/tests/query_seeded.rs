@@ -336,3 +336,91 @@ fn coherent_queries_ignore_a_foreign_state() {
         assert!(out[7].is_none());
     }
 }
+
+/// The memory carried from one frame's points to the next frame's by pixel
+/// (`Coherence::carry_to_pixels`: the same pixel, else an adjacent one) gives the plain and
+/// front-facing answers bit for bit, whatever the match — the same points in another order, a
+/// point moved to an adjacent pixel, noisy points, pixels without an old point, a pixel
+/// outside the image, a repeated pixel, a carry without pixels before it — and lets a good
+/// part of the next frame's first call keep their element when their surface barely moved.
+#[test]
+fn coherence_carried_by_pixels_equals_fresh_queries() {
+    let view = View::Perspective {
+        camera_center: Vector3::zeros(),
+    };
+    let width = 64u32;
+    for scene in rendered::rendered_scenes() {
+        let n = scene.points.len();
+        let height = (8 * n as u32 + 3 * width) / width + 2;
+        // Frame A: point i at pixel 3i.
+        let pixels_a: Vec<u32> = (0..n as u32).map(|i| 3 * i).collect();
+        // Frame B: the same points reversed (pixel-matched, not index-matched), every 7th one
+        // moved to the adjacent pixel (3i + 1), every 11th one noisy at a pixel with no old
+        // point at or next to it (beyond frame A's rows), one outside the image and two
+        // sharing a pixel.
+        let mut points_b = scene.points.clone();
+        let mut pixels_b = pixels_a.clone();
+        for i in 0..n {
+            if i % 7 == 3 {
+                pixels_b[i] += 1;
+            }
+            if i % 11 == 5 {
+                points_b[i] = scene.noisy[i];
+                pixels_b[i] = 3 * (n as u32) + 2 * width + 5 * i as u32;
+            }
+        }
+        pixels_b[0] = width * height + 9;
+        pixels_b[2] = pixels_b[1];
+        points_b.reverse();
+        pixels_b.reverse();
+        let moved = blend(&scene.previous, &scene.spheres, 0.3);
+        for front_facing in [false, true] {
+            let project = |g: &SphereMeshGeometry,
+                           points: &[Vector3<f64>],
+                           state: &mut Coherence,
+                           out: &mut Vec<Option<Projection>>| {
+                let mut fresh = vec![None; points.len()];
+                if front_facing {
+                    g.project_points_front_facing_coherent(points, &view, state, out);
+                    g.project_points_front_facing(points, &view, &mut fresh);
+                } else {
+                    g.project_points_coherent(points, state, out);
+                    g.project_points(points, &mut fresh);
+                }
+                for (a, b) in out.iter().zip(&fresh) {
+                    assert_eq!(bits(a), bits(b), "{} {front_facing}", scene.name);
+                }
+                state.kept()
+            };
+            let mut g = SphereMeshGeometry::new(&scene.previous, &scene.elements).unwrap();
+            let mut out = vec![None; n];
+            let mut state = Coherence::default();
+            // Filled without a carry: the first carry forgets it.
+            project(&g, &scene.noisy, &mut state, &mut out);
+            state.carry_to_pixels(&pixels_a, width, height);
+            assert_eq!(project(&g, &scene.points, &mut state, &mut out), 0);
+            for t in [0.05, 0.1] {
+                g.update(&blend(&scene.previous, &scene.spheres, t))
+                    .unwrap();
+                project(&g, &scene.points, &mut state, &mut out);
+            }
+            // The next frame, the model moved on.
+            g.update(&moved).unwrap();
+            let mut plain = state.clone();
+            plain.clear();
+            let cold = project(&g, &points_b, &mut plain, &mut out);
+            state.carry_to_pixels(&pixels_b, width, height);
+            let carried = project(&g, &points_b, &mut state, &mut out);
+            assert_eq!(cold, 0);
+            assert!(
+                carried > n / 5,
+                "{} {front_facing}: {carried} of {n}",
+                scene.name
+            );
+            // Carried on once more, to frame A's pixels and points.
+            state.carry_to_pixels(&pixels_a, width, height);
+            g.update(&scene.spheres).unwrap();
+            project(&g, &scene.points, &mut state, &mut out);
+        }
+    }
+}

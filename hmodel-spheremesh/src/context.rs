@@ -182,9 +182,20 @@ impl<'m> TrackingCtx<'m> {
     }
 
     /// Take the points, camera, silhouette distance transform and wristband of a preprocessed
-    /// frame (reusing the buffers).
+    /// frame (reusing the buffers). When the frame names the pixel of every point (as
+    /// preprocessed frames do), each point inherits the closest-point memory of the previous
+    /// frame's point at the same or an adjacent pixel ([`Coherence::carry_to_pixels`]): the
+    /// first iteration of the frame then skips the search for the points whose surface barely
+    /// moved, with the same correspondences (bit for bit) as a fresh search.
     pub fn set_frame(&mut self, frame: &PreprocessedFrame) {
-        self.set_points(&frame.points);
+        self.load_points(&frame.points);
+        match frame.camera.as_ref() {
+            Some(c) if frame.pixels.len() == frame.points.len() => {
+                self.coherence
+                    .carry_to_pixels(&frame.pixels, c.width, c.height);
+            }
+            _ => self.coherence.clear(),
+        }
         self.sensor.set_frame(frame);
         self.render_mask_valid = false;
     }
@@ -192,12 +203,17 @@ impl<'m> TrackingCtx<'m> {
     /// Replace the sensor points (camera frame, mm); correspondences are stale until the next
     /// [`TrackingCtx::update`].
     pub fn set_points(&mut self, points: &[Vector3<f64>]) {
+        self.load_points(points);
+        self.coherence.clear();
+    }
+
+    /// [`TrackingCtx::set_points`] but for the closest-point memory.
+    fn load_points(&mut self, points: &[Vector3<f64>]) {
         let n = points.len();
         self.points.clear();
         self.points.extend_from_slice(points);
         self.correspondences.clear();
         self.correspondences.resize(n, None);
-        self.coherence.clear();
         self.directions.clear();
         self.directions.resize(n, Vector3::zeros());
         self.residuals.clear();
@@ -586,5 +602,68 @@ mod tests {
             assert_eq!(ctx.pushes(), fresh.pushes(), "stride {stride}");
         }
         assert!(!ctx.pushes().is_empty());
+    }
+
+    /// A context that carries its closest-point memory from frame to frame by pixel
+    /// (`set_frame` with the points' pixels) has, at every iteration of the next frame, the
+    /// correspondences and pushes of a fresh context — bit for bit — while its first iteration
+    /// skips searches; a frame without pixels forgets the memory.
+    #[test]
+    fn carried_coherence_gives_fresh_correspondences() {
+        let t = default_right_hand();
+        let sk = &t.skeleton;
+        let camera = Camera::sr300_qvga();
+        let at = |flex: f64, tx: f64| {
+            Pose::from_named(
+                sk,
+                [
+                    ("global_tz", 400.0),
+                    ("global_tx", tx),
+                    ("index_mcp_flex", flex),
+                    ("middle_pip_flex", 0.5 * flex),
+                ],
+            )
+            .unwrap()
+        };
+        let frames = [
+            rendered_frame(&t, &at(0.3, 0.0), &camera, 2000).unwrap(),
+            rendered_frame(&t, &at(0.32, 0.3), &camera, 2000).unwrap(),
+        ];
+        assert_eq!(frames[1].pixels.len(), frames[1].points.len());
+        let mut without_pixels = frames[1].clone();
+        without_pixels.pixels.clear();
+        let view = View::Perspective {
+            camera_center: Vector3::zeros(),
+        };
+        let mut ctx = TrackingCtx::new(&t, view, IrlsParams::default()).unwrap();
+        ctx.set_frame(&frames[0]);
+        for k in 0..4 {
+            ctx.update(&at(0.3 + 0.01 * f64::from(k), 0.5), false)
+                .unwrap();
+        }
+        for (frame, carried) in [(&frames[1], true), (&without_pixels, false)] {
+            ctx.set_frame(frame);
+            let mut fresh = TrackingCtx::new(&t, view, IrlsParams::default()).unwrap();
+            fresh.set_points(&frame.points);
+            fresh.set_frame(frame);
+            for k in 0..3 {
+                let pose = at(0.33 + 0.01 * f64::from(k), 0.5);
+                ctx.update(&pose, k == 0).unwrap();
+                fresh.update(&pose, k == 0).unwrap();
+                assert_eq!(ctx.correspondences(), fresh.correspondences());
+                assert_eq!(ctx.residuals(), fresh.residuals());
+                assert_eq!(ctx.pushes(), fresh.pushes());
+                if k == 0 {
+                    let kept = ctx.coherence.kept();
+                    assert_eq!(kept > frame.points.len() / 10, carried, "{kept}");
+                    assert_eq!(fresh.coherence.kept(), 0);
+                }
+            }
+            // Bitwise, beyond `==` (which equates 0 and −0).
+            let bits = |c: &TrackingCtx<'_>| -> Vec<u64> {
+                c.residuals().iter().map(|r| r.to_bits()).collect()
+            };
+            assert_eq!(bits(&ctx), bits(&fresh));
+        }
     }
 }

@@ -26,7 +26,12 @@
 //!   object-space silhouette is orthographic either way (§3.3.1).
 //! - E_m2d renders every pixel outside the sensor silhouette at the sensor resolution (QVGA);
 //!   pixels are found through conservative per-element screen footprints, so the cost follows
-//!   the part of the model outside the silhouette ([`hand_model::render::DepthRenderer::render_hits`]).
+//!   the part of the model outside the silhouette ([`hand_model::render::DepthRenderer::render_hits`]);
+//!   footprint rows that keep no pixel near the element are skipped before their span.
+//! - The closest points of every iteration start from each point's previous element and margin
+//!   ([`hand_model::query::Coherence`]), carried across frames by pixel when the frame names its
+//!   points' pixels ([`TrackingCtx::set_frame`]): bit for bit the correspondences of a fresh
+//!   search, most of them without one (`honline-calib/benches/online.rs` has the timings).
 //! - Collisions: finger pills only, rest-pose overlaps tolerated, hmodel's under-relaxation
 //!   `fraction` left out (it makes the rows inconsistent with the energy; LM damping limits the
 //!   step instead).

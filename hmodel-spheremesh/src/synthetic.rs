@@ -59,8 +59,8 @@ pub fn surface_cloud(
 }
 
 /// The frame the camera sees of `template` at `pose`: at most `max_points` points spread
-/// evenly over the rendered pixels (all of them when fewer), the camera, and the distance
-/// transform of the rendered silhouette. An error when the camera is invalid.
+/// evenly over the rendered pixels (all of them when fewer) with their pixel indices, the camera,
+/// and the distance transform of the rendered silhouette. An error when the camera is invalid.
 pub fn rendered_frame(
     template: &SphereMeshTemplate,
     pose: &Pose,
@@ -78,6 +78,7 @@ pub fn rendered_frame(
         .step_by(step)
         .map(|&k| camera.backproject((k % w) as f64, (k / w) as f64, f64::from(r.depth[k])))
         .collect();
+    let pixels = hits.iter().step_by(step).map(|&k| k as u32).collect();
     let mut mask = Mask::zeros(camera.width, camera.height);
     for &k in &hits {
         mask.data[k] = 1;
@@ -86,6 +87,7 @@ pub fn rendered_frame(
     dt.compute(&mask);
     Ok(PreprocessedFrame {
         points,
+        pixels,
         camera: Some(camera.clone()),
         dt,
         ..PreprocessedFrame::default()

@@ -21,6 +21,7 @@
 //! the minimum plus the gap. The answers are bit for bit those of the plain search.
 
 use super::geometry::SphereMeshGeometry;
+use super::union_silhouette::UnionSilhouette;
 use super::{is_usable, Projection, NO_SEED};
 use crate::shape::{Element, Sphere};
 use nalgebra::Vector3;
@@ -37,8 +38,10 @@ const ROUNDING: f64 = 1e-9;
 /// The per-point memory of [`SphereMeshGeometry::project_points_coherent`] and
 /// [`SphereMeshGeometry::project_points_front_facing_coherent`] between calls: the winning
 /// element of each point's last search and how far every other element was, with the spheres
-/// and points that held for. Build it empty with [`Coherence::default`]; the calls size it and
-/// allocate nothing once it has held as many points and spheres.
+/// and points that held for; also the storage of the front-facing calls' object-space
+/// silhouette, rebuilt in place per call. Build it empty with [`Coherence::default`]; the calls
+/// size it and allocate nothing once it has held as many points and spheres (and, for the
+/// front-facing calls, once one of them has needed a silhouette).
 ///
 /// The state only saves work: whatever it holds (another model, other points, stale
 /// answers), the projections are bit for bit those of
@@ -53,6 +56,17 @@ pub struct Coherence {
     motions: Vec<f64>,
     /// How many points of the last call kept their element without a search.
     kept: usize,
+    /// The image pixel of each track's point when the tracks were carried by pixel
+    /// ([`Coherence::carry_to_pixels`]); empty otherwise.
+    pixels: Vec<u32>,
+    /// Scratch of the carry: per image pixel, 1 + the index of the old track there (0: none);
+    /// all zero between carries.
+    by_pixel: Vec<u32>,
+    /// Scratch of the carry: the new tracks.
+    carried: Vec<Track>,
+    /// The object-space silhouette of the front-facing calls, rebuilt in place per call
+    /// (allocated by the first call that needs one).
+    pub(super) silhouette: Option<Box<UnionSilhouette>>,
 }
 
 /// One point's memory.
@@ -65,6 +79,18 @@ struct Track {
     /// The point the margin is for.
     point: Vector3<f64>,
 }
+
+/// The 8 pixels around a pixel, the 4 edge neighbours (nearer) first, each group in row order.
+const NEIGHBOURS: [(isize, isize); 8] = [
+    (0, -1),
+    (-1, 0),
+    (1, 0),
+    (0, 1),
+    (-1, -1),
+    (1, -1),
+    (-1, 1),
+    (1, 1),
+];
 
 impl Track {
     const NONE: Self = Self {
@@ -83,11 +109,73 @@ impl Coherence {
 
     /// Forgets every point (the next call searches them all in full).
     pub fn clear(&mut self) {
+        self.pixels.clear();
         self.tracks.clear();
         self.spheres.clear();
         self.elements.clear();
         self.motions.clear();
         self.kept = 0;
+    }
+
+    /// Hands the memory of the last call's points over to the points of a new frame, matched by
+    /// image pixel: `pixels[i]` is the linear pixel index (`v · width + u`, `u < width`,
+    /// `v < height`) of the new `i`-th point, and it inherits the track of the old point at the
+    /// same pixel or, failing that, at the nearest of the 8 pixels around it (the first in row
+    /// order among equals). The old points' pixels are those of the previous carry; without
+    /// one (the state was filled after [`Coherence::clear`] or never carried) every track is
+    /// forgotten. Points with a pixel outside the image inherit nothing.
+    ///
+    /// Any inherited track is sound: its margin is reduced by how far the new point lies from
+    /// the old one and by the motion of the model since (module docs), so the next call's
+    /// projections are bit for bit the plain ones whatever the match; a close match (the same
+    /// surface point seen again one frame later) only lets more points skip their search in
+    /// the first solver iteration of the frame, which otherwise searches every point. Allocates
+    /// nothing once the state has held as many points and an image as large.
+    pub fn carry_to_pixels(&mut self, pixels: &[u32], width: u32, height: u32) {
+        let (w, h) = (width as usize, height as usize);
+        let size = w * h;
+        let valid = self.pixels.len() == self.tracks.len()
+            && self.pixels.iter().all(|&k| (k as usize) < size);
+        self.carried.clear();
+        if valid && !self.pixels.is_empty() {
+            if self.by_pixel.len() < size {
+                self.by_pixel.resize(size, 0);
+            }
+            for (i, &k) in self.pixels.iter().enumerate() {
+                // A repeated pixel keeps its first point.
+                let slot = &mut self.by_pixel[k as usize];
+                if *slot == 0 {
+                    *slot = i as u32 + 1;
+                }
+            }
+            let by_pixel = &self.by_pixel;
+            let tracks = &self.tracks;
+            let at = |u: isize, v: isize| -> Option<Track> {
+                if u < 0 || v < 0 || u as usize >= w || v as usize >= h {
+                    return None;
+                }
+                let i = by_pixel[v as usize * w + u as usize];
+                (i != 0).then(|| tracks[i as usize - 1])
+            };
+            self.carried.extend(pixels.iter().map(|&k| {
+                let k = k as usize;
+                if k >= size {
+                    return Track::NONE;
+                }
+                let (u, v) = ((k % w) as isize, (k / w) as isize);
+                at(u, v)
+                    .or_else(|| NEIGHBOURS.iter().find_map(|&(du, dv)| at(u + du, v + dv)))
+                    .unwrap_or(Track::NONE)
+            }));
+            for &k in &self.pixels {
+                self.by_pixel[k as usize] = 0;
+            }
+        } else {
+            self.carried.resize(pixels.len(), Track::NONE);
+        }
+        std::mem::swap(&mut self.tracks, &mut self.carried);
+        self.pixels.clear();
+        self.pixels.extend_from_slice(pixels);
     }
 
     /// Sizes the state for `n` points, sets each element's motion since the last call (+∞ for
@@ -141,16 +229,14 @@ impl SphereMeshGeometry {
         let mut kept = 0;
         let max_motion = state.motions.iter().copied().fold(0.0, f64::max);
         for ((p, o), track) in points.iter().zip(out.iter_mut()).zip(&mut state.tracks) {
-            let (pr, reused) = self.project_tracked(p, track, &state.motions, max_motion);
-            *o = pr;
-            kept += usize::from(reused);
+            kept += usize::from(self.project_tracked(p, track, &state.motions, max_motion, o));
         }
         state.kept = kept;
     }
 
-    /// The plain projection of `p` given its memory `track` and the elements' `motions` since
-    /// `track` was set (`max_motion` the largest); updates `track` and says whether the search
-    /// was skipped.
+    /// The plain projection of `p` into `out` given its memory `track` and the elements'
+    /// `motions` since `track` was set (`max_motion` the largest); updates `track` and says
+    /// whether the search was skipped.
     #[inline]
     fn project_tracked(
         &self,
@@ -158,17 +244,20 @@ impl SphereMeshGeometry {
         track: &mut Track,
         motions: &[f64],
         max_motion: f64,
-    ) -> (Option<Projection>, bool) {
+        out: &mut Option<Projection>,
+    ) -> bool {
         if !is_usable(p) {
             *track = Track::NONE;
-            return (None, false);
+            *out = None;
+            return false;
         }
         let seed = track.element as usize;
         let (first, pr) = match self.frames.get(seed) {
             Some(frame) => (seed, frame.project(p)),
             None => {
                 let Some(guess) = self.tree.guess(p) else {
-                    return (None, false);
+                    *out = None;
+                    return false;
                 };
                 (guess, self.frames[guess].project(p))
             }
@@ -190,7 +279,8 @@ impl SphereMeshGeometry {
                     margin,
                     point: *p,
                 };
-                return (Some(self.globalize(seed, pr)), true);
+                *out = Some(self.globalize(seed, pr));
+                return true;
             }
         }
         let search = self.search(p, first, pr.distance, MARGIN_GAP);
@@ -205,7 +295,8 @@ impl SphereMeshGeometry {
         } else {
             self.frames[e].project(p)
         };
-        (Some(self.globalize(e, pr)), false)
+        *out = Some(self.globalize(e, pr));
+        false
     }
 
     /// The largest motion of the elements other than `skip` whose bounding balls may come

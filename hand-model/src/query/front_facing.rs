@@ -134,8 +134,10 @@ impl SphereMeshGeometry {
     /// [`project_points_front_facing`](Self::project_points_front_facing) with the plain
     /// projections of [`project_points_coherent`](Self::project_points_coherent): for a tracker
     /// that re-projects the same points every solver iteration, most points skip the search of
-    /// Eq. 3.6. `out` is bit for bit what the call without `state` returns, whatever `state`
-    /// holds. Allocates nothing once `state` has held as many points.
+    /// Eq. 3.6, and the object-space silhouette is rebuilt in `state`'s storage instead of a
+    /// fresh one on the stack. `out` is bit for bit what the call without `state` returns,
+    /// whatever `state` holds. Allocates nothing once `state` has held as many points and a
+    /// silhouette.
     ///
     /// # Panics
     /// If `out.len() != points.len()`.
@@ -164,11 +166,20 @@ impl SphereMeshGeometry {
             out.fill(None);
             return;
         }
-        match plain {
-            PlainSearch::Fresh => self.project_batch(points, None, out),
-            PlainSearch::Seeded(seeds) => self.project_batch(points, Some(seeds), out),
-            PlainSearch::Coherent(state) => self.project_points_coherent(points, state, out),
-        }
+        let state = match plain {
+            PlainSearch::Fresh => {
+                self.project_batch(points, None, out);
+                None
+            }
+            PlainSearch::Seeded(seeds) => {
+                self.project_batch(points, Some(seeds), out);
+                None
+            }
+            PlainSearch::Coherent(state) => {
+                self.project_points_coherent(points, state, out);
+                Some(state)
+            }
+        };
         if !out
             .iter()
             .any(|o| o.is_some_and(|q| view.is_back_facing(&q.point, &q.normal)))
@@ -178,12 +189,28 @@ impl SphereMeshGeometry {
         let Some(direction) = self.silhouette_direction(view) else {
             return;
         };
-        let mut silhouette =
-            UnionSilhouette::build(self, ViewBasis::new(direction), BURIED_TOLERANCE);
+        let basis = ViewBasis::new(direction);
+        // A coherent state keeps its silhouette between calls: rebuilt in place, the same
+        // silhouette as a fresh one.
+        let mut fresh = None;
+        let silhouette: &mut UnionSilhouette = match state {
+            Some(state) => match &mut state.silhouette {
+                Some(s) => {
+                    s.rebuild(self, basis, BURIED_TOLERANCE);
+                    s
+                }
+                none => none.insert(Box::new(UnionSilhouette::build(
+                    self,
+                    basis,
+                    BURIED_TOLERANCE,
+                ))),
+            },
+            None => fresh.insert(UnionSilhouette::build(self, basis, BURIED_TOLERANCE)),
+        };
         for (p, o) in points.iter().zip(out.iter_mut()) {
             if let Some(plain) = o {
                 if view.is_back_facing(&plain.point, &plain.normal) {
-                    *plain = self.substitute(p, plain, view, &mut silhouette);
+                    *plain = self.substitute(p, plain, view, silhouette);
                 }
             }
         }

@@ -115,6 +115,28 @@ impl Footprint {
         (lo <= hi).then_some((lo as u32, hi as u32))
     }
 
+    /// Columns `[u0, u1]` (inclusive, clipped to `width`) that hold every row's
+    /// [`span`](Self::span): the discs' extent (the quadrilaterals join tangent points of the
+    /// discs) grown by a pixel against rounding; `None` when no row has a span.
+    pub(crate) fn columns(&self, width: u32) -> Option<(u32, u32)> {
+        let last = f64::from(width) - 1.0;
+        let (lo, hi) = match self {
+            Self::Everywhere => (0.0, last),
+            Self::Discs(c, r, n, _) => {
+                let discs = c[..*n].iter().zip(r);
+                let lo = discs
+                    .clone()
+                    .map(|(p, r)| p.x - r)
+                    .fold(f64::INFINITY, f64::min);
+                let hi = discs
+                    .map(|(p, r)| p.x + r)
+                    .fold(f64::NEG_INFINITY, f64::max);
+                ((lo - 1.0).floor().max(0.0), (hi + 1.0).ceil().min(last))
+            }
+        };
+        (lo <= hi).then_some((lo as u32, hi as u32))
+    }
+
     /// The columns `[u0, u1]` (inclusive, clipped to `width`) of row `v` inside the footprint.
     pub(crate) fn span(&self, v: u32, width: u32) -> Option<(u32, u32)> {
         let last = f64::from(width) - 1.0;

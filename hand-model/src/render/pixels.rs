@@ -11,6 +11,16 @@ pub trait KeptPixels {
     /// Whether pixel `k` (`v·width + u`) is kept.
     fn keeps(&mut self, k: usize) -> bool;
 
+    /// Whether row `v` of an image `width` pixels wide may keep a column of `[u0, u1]`
+    /// (inclusive): false only when it keeps none there, so that a renderer can skip the row
+    /// without working out which of those columns a footprint covers. The default answers
+    /// true (a predicate is not scanned ahead).
+    #[inline]
+    fn any_in_row(&mut self, width: u32, v: u32, u0: u32, u1: u32) -> bool {
+        let _ = (width, v, u0, u1);
+        true
+    }
+
     /// Calls `f(u)` for every kept column `u` of `[u0, u1]` (inclusive) in row `v` of an image
     /// `width` pixels wide, in increasing order.
     #[inline]
@@ -85,6 +95,18 @@ impl KeptPixels for &PixelRuns {
         self.row(k / w).iter().any(|&[a, b]| a <= u && u <= b)
     }
 
+    /// Exact: whether a run of row `v` meets `[u0, u1]` (`width` must be the set's).
+    #[inline]
+    fn any_in_row(&mut self, width: u32, v: u32, u0: u32, u1: u32) -> bool {
+        debug_assert_eq!(width, self.width);
+        u0 <= u1
+            && self
+                .row(v as usize)
+                .iter()
+                .take_while(|&&[a, _]| a <= u1)
+                .any(|&[_, b]| b >= u0)
+    }
+
     /// Visits only the runs that meet `[u0, u1]` (`width` must be the set's).
     #[inline]
     fn for_each_in_row(&mut self, width: u32, v: u32, u0: u32, u1: u32, mut f: impl FnMut(u32)) {
@@ -104,8 +126,9 @@ impl KeptPixels for &PixelRuns {
 mod tests {
     use super::*;
 
-    /// The runs hold exactly the predicate's pixels, and a row visit yields the same columns
-    /// as the pixel-by-pixel visit of the predicate.
+    /// The runs hold exactly the predicate's pixels, a row visit yields the same columns as
+    /// the pixel-by-pixel visit of the predicate, and a row is said to keep some column of a
+    /// range exactly when the visit yields one.
     #[test]
     fn runs_equal_the_predicate() {
         let (w, h) = (37u32, 11u32);
@@ -122,6 +145,7 @@ mod tests {
                 let mut plain = |k: usize| v < h && keep(k);
                 plain.for_each_in_row(w, v, u0, u1, |u| b.push(u));
                 assert_eq!(a, b, "row {v} [{u0}, {u1}]");
+                assert_eq!((&runs).any_in_row(w, v, u0, u1), !a.is_empty());
             }
         }
     }

@@ -90,8 +90,10 @@ impl NormalEquations {
 
     /// Zero `A` and `b` (keeps the storage).
     pub fn clear(&mut self) {
-        self.lhs.fill(0.0);
-        self.rhs.fill(0.0);
+        // On the contiguous storage (one `memset`; `fill` on the matrix went element by
+        // element).
+        self.lhs.as_mut_slice().fill(0.0);
+        self.rhs.as_mut_slice().fill(0.0);
         self.symmetric = true;
     }
 
@@ -411,14 +413,14 @@ impl NormalEquations {
 
     /// Whether every entry of the upper triangle of `A` and of `b` is finite.
     pub fn is_finite(&self) -> bool {
+        // Branch-free per column (exponent bits all ones: ±∞ or NaN), so that it vectorises.
+        const EXPONENT: u64 = 0x7ff0_0000_0000_0000;
+        let bad = |v: &f64| v.to_bits() & EXPONENT == EXPONENT;
         let n = self.n;
+        let data = self.lhs.as_slice();
         (0..n).all(|j| {
-            self.lhs
-                .column(j)
-                .rows(0, j + 1)
-                .iter()
-                .all(|v| v.is_finite())
-                && self.rhs[j].is_finite()
+            let column = &data[j * n..j * n + j + 1];
+            !column.iter().fold(false, |any, v| any | bad(v)) && !bad(&self.rhs[j])
         })
     }
 }
@@ -534,5 +536,38 @@ mod tests {
         assert!(!ne.is_finite());
         ne.clear();
         assert!(ne.is_finite());
+    }
+
+    /// `is_finite` is the entry-by-entry test it replaces: a NaN or ±∞ anywhere in the upper
+    /// triangle of `A` or in `b` is found, one in the lower triangle (not yet symmetrized) is
+    /// not; extreme finite values pass. `clear` zeroes everything.
+    #[test]
+    fn is_finite_reads_the_upper_triangle_and_the_rhs() {
+        let n = 7;
+        let reference = |ne: &NormalEquations| {
+            (0..n).all(|j| (0..=j).all(|i| ne.lhs()[(i, j)].is_finite()) && ne.rhs()[j].is_finite())
+        };
+        for bad in [
+            f64::NAN,
+            f64::INFINITY,
+            f64::NEG_INFINITY,
+            f64::MAX,
+            -f64::MIN_POSITIVE,
+        ] {
+            for i in 0..n {
+                for j in 0..n {
+                    let mut ne = NormalEquations::new(n);
+                    ne.add_diagonal(3, 2.0).unwrap();
+                    ne.lhs[(i, j)] = bad;
+                    assert_eq!(ne.is_finite(), reference(&ne), "{bad} at ({i}, {j})");
+                    assert_eq!(ne.is_finite(), i > j || bad.is_finite());
+                    ne.clear();
+                    assert!(ne.is_finite() && ne.lhs().iter().all(|&v| v == 0.0));
+                }
+                let mut ne = NormalEquations::new(n);
+                ne.rhs[i] = bad;
+                assert_eq!(ne.is_finite(), bad.is_finite());
+            }
+        }
     }
 }
