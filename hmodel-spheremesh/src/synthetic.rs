@@ -6,8 +6,8 @@ use hand_model::kinematics::Pose;
 use hand_model::render::render_depth;
 use hand_model::spheremesh::{PosedSphereMesh, SphereMeshTemplate};
 use sensor_io::dt::DistanceTransform;
-use sensor_io::preprocess::PreprocessedFrame;
-use sensor_io::{Camera, Mask};
+use sensor_io::preprocess::{HandSegment, PreprocessedFrame};
+use sensor_io::{Camera, DepthImage, Mask};
 
 use crate::context::intrinsics;
 
@@ -60,7 +60,8 @@ pub fn surface_cloud(
 
 /// The frame the camera sees of `template` at `pose`: at most `max_points` points spread
 /// evenly over the rendered pixels (all of them when fewer) with their pixel indices, the camera,
-/// and the distance transform of the rendered silhouette. An error when the camera is invalid.
+/// the depth image (mm, rounded), the silhouette as the hand's segment and its distance
+/// transform. An error when the camera is invalid.
 pub fn rendered_frame(
     template: &SphereMeshTemplate,
     pose: &Pose,
@@ -85,11 +86,26 @@ pub fn rendered_frame(
     }
     let mut dt = DistanceTransform::default();
     dt.compute(&mask);
+    let depth = DepthImage {
+        width: camera.width,
+        height: camera.height,
+        data: r
+            .depth
+            .iter()
+            .map(|&z| z.round().clamp(0.0, 65535.0) as u16)
+            .collect(),
+    };
     Ok(PreprocessedFrame {
         points,
         pixels,
         camera: Some(camera.clone()),
         dt,
+        depth,
+        hand: HandSegment {
+            count: hits.len(),
+            mask,
+            ..HandSegment::default()
+        },
         ..PreprocessedFrame::default()
     })
 }

@@ -239,6 +239,8 @@ pub struct ShapePriorParams {
 /// as one-sided quadratic barriers and the LM damping of β.
 pub struct ShapePrior {
     params: ShapePriorParams,
+    /// Factor on the two ω ([`ShapePrior::set_noise_scale`]).
+    scale: f64,
     layout: Layout,
     /// Per active entry: template value, latent axis, bounds, radius.
     entries: Vec<(f64, usize, Option<[f64; 2]>, bool)>,
@@ -262,9 +264,20 @@ impl ShapePrior {
             .collect();
         Self {
             params,
+            scale: 1.0,
             layout: layout.clone(),
             entries,
         }
+    }
+
+    /// Express ω per unit of the data's noise: both ω times `scale` (σ̂² in mm², at least 1;
+    /// see [`crate::OnlineConfig::noise_scaled_prior`]).
+    pub fn set_noise_scale(&mut self, scale: f64) {
+        self.scale = if scale.is_finite() {
+            scale.max(1.0)
+        } else {
+            1.0
+        };
     }
 }
 
@@ -286,11 +299,12 @@ impl EnergyTerm<OnlineCtx> for ShapePrior {
                 found: ctx.beta.len(),
             })?;
             let bi = self.layout.beta_index(k);
-            let w = if radius {
-                self.params.radius_weight
-            } else {
-                self.params.weight
-            };
+            let w = self.scale
+                * if radius {
+                    self.params.radius_weight
+                } else {
+                    self.params.weight
+                };
             let r = b - bar * ctx.latent[axis];
             stats += ne.add_row(&[(bi, 1.0), (self.layout.latent + axis, -bar)], r, w)?;
             if let Some([lo, hi]) = limits {

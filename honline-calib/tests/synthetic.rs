@@ -131,3 +131,39 @@ fn no_hand_keeps_the_template() {
         assert!(out.record.pose.values().all(|v| v.is_finite()));
     }
 }
+
+/// The shape-space prior is scaled by the depth noise measured on the frames: ≈ the added
+/// noise on noisy frames, below 1 mm (no scaling) on clean ones.
+#[test]
+fn depth_noise_is_measured_on_the_frames() {
+    use rand::{Rng, SeedableRng};
+    let base = default_right_hand();
+    let (_, truth) = subject(&base, 0.1, 3);
+    let camera = Camera::sr300_qvga();
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(5);
+    for sigma in [0.0, 5.0] {
+        let mut calib = OnlineCalibrator::new(&base, OnlineConfig::default(), None).unwrap();
+        calib.set_pose(&pose(&truth, 0, true)).unwrap();
+        for k in 0..20 {
+            let mut frame: PreprocessedFrame =
+                rendered_frame(&truth, &pose(&truth, k, true), &camera, 1500).unwrap();
+            for d in frame.depth.data.iter_mut().filter(|d| **d > 0) {
+                // Box–Muller.
+                let (a, b): (f64, f64) = (rng.random_range(1e-12..1.0), rng.random());
+                let n = (-2.0 * a.ln()).sqrt() * (std::f64::consts::TAU * b).cos();
+                *d = (f64::from(*d) + sigma * n).round().max(1.0) as u16;
+            }
+            let out = calib.track(&frame, k as u64, k as f64 / 30.0);
+            assert!(out.beta.iter().all(|b| b.is_finite()));
+        }
+        let measured = calib.depth_noise().expect("measured");
+        if sigma == 0.0 {
+            assert!(measured < 1.0, "clean frames: σ̂ {measured}");
+        } else {
+            assert!(
+                (measured - sigma).abs() < 0.25 * sigma,
+                "σ {sigma}: σ̂ {measured}"
+            );
+        }
+    }
+}

@@ -9,13 +9,18 @@ use crate::{DepthImage, Mask};
 /// noise; triples across a depth edge (neighbours more than `EDGE` mm apart) are left out.
 /// `None` when fewer than `MIN_SAMPLES` triples qualify (an empty or tiny segment).
 pub fn depth_noise(depth: &DepthImage, mask: &Mask) -> Option<f64> {
+    depth_noise_with(depth, mask, &mut Vec::new())
+}
+
+/// [`depth_noise`] with a caller's scratch buffer (no allocation once it is large enough).
+pub fn depth_noise_with(depth: &DepthImage, mask: &Mask, diffs: &mut Vec<f64>) -> Option<f64> {
     const EDGE: f64 = 40.0;
     const MIN_SAMPLES: usize = 50;
     if mask.width != depth.width || mask.height != depth.height || depth.width < 3 {
         return None;
     }
     let w = depth.width as usize;
-    let mut diffs: Vec<f64> = Vec::new();
+    diffs.clear();
     for (row, mrow) in depth.data.chunks_exact(w).zip(mask.data.chunks_exact(w)) {
         for u in 1..w - 1 {
             let (a, b, c) = (row[u - 1], row[u], row[u + 1]);
