@@ -98,21 +98,28 @@ impl Footprint {
     /// none.
     pub(crate) fn rows(&self, height: u32) -> Option<(u32, u32)> {
         let last = f64::from(height) - 1.0;
-        let (lo, hi) = match self {
-            Self::Everywhere => (0.0, last),
-            Self::Discs(c, r, n, _) => {
-                let discs = c[..*n].iter().zip(r);
-                let lo = discs
-                    .clone()
-                    .map(|(p, r)| p.y - r)
-                    .fold(f64::INFINITY, f64::min);
-                let hi = discs
-                    .map(|(p, r)| p.y + r)
-                    .fold(f64::NEG_INFINITY, f64::max);
-                (lo.ceil().max(0.0), hi.floor().min(last))
-            }
+        let (lo, hi) = match self.extent(1) {
+            None => (0.0, last),
+            Some((lo, hi)) => (lo.ceil().max(0.0), hi.floor().min(last)),
         };
         (lo <= hi).then_some((lo as u32, hi as u32))
+    }
+
+    /// The discs' extent `[min, max]` along image axis `axis` (0: u, 1: v); `None` for
+    /// [`Footprint::Everywhere`].
+    fn extent(&self, axis: usize) -> Option<(f64, f64)> {
+        let Self::Discs(c, r, n, _) = self else {
+            return None;
+        };
+        let discs = c[..*n].iter().zip(r);
+        let lo = discs
+            .clone()
+            .map(|(p, r)| p[axis] - r)
+            .fold(f64::INFINITY, f64::min);
+        let hi = discs
+            .map(|(p, r)| p[axis] + r)
+            .fold(f64::NEG_INFINITY, f64::max);
+        Some((lo, hi))
     }
 
     /// Columns `[u0, u1]` (inclusive, clipped to `width`) that hold every row's
@@ -120,19 +127,9 @@ impl Footprint {
     /// discs) grown by a pixel against rounding; `None` when no row has a span.
     pub(crate) fn columns(&self, width: u32) -> Option<(u32, u32)> {
         let last = f64::from(width) - 1.0;
-        let (lo, hi) = match self {
-            Self::Everywhere => (0.0, last),
-            Self::Discs(c, r, n, _) => {
-                let discs = c[..*n].iter().zip(r);
-                let lo = discs
-                    .clone()
-                    .map(|(p, r)| p.x - r)
-                    .fold(f64::INFINITY, f64::min);
-                let hi = discs
-                    .map(|(p, r)| p.x + r)
-                    .fold(f64::NEG_INFINITY, f64::max);
-                ((lo - 1.0).floor().max(0.0), (hi + 1.0).ceil().min(last))
-            }
+        let (lo, hi) = match self.extent(0) {
+            None => (0.0, last),
+            Some((lo, hi)) => ((lo - 1.0).floor().max(0.0), (hi + 1.0).ceil().min(last)),
         };
         (lo <= hi).then_some((lo as u32, hi as u32))
     }
