@@ -270,7 +270,8 @@ impl ShapePrior {
         }
     }
 
-    /// Express ω per unit of the data's noise: both ω times `scale` (σ̂² in mm², at least 1;
+    /// Express ω per unit of the data's noise: both ω times `scale`
+    /// (`sensor_io::preprocess::noise_scale` of σ̂; a non-finite or sub-1 value counts as 1;
     /// see [`crate::OnlineConfig::noise_scaled_prior`]).
     pub fn set_noise_scale(&mut self, scale: f64) {
         self.scale = if scale.is_finite() {

@@ -18,7 +18,7 @@ use hand_model::shape::Element;
 use hand_model::solver::{IrlsParams, NormalEquations};
 use hand_model::spheremesh::{PosedSphereMesh, SphereMeshTemplate};
 use nalgebra::{DMatrix, DVector, Vector3};
-use sensor_io::preprocess::{depth_noise, PreprocessedFrame};
+use sensor_io::preprocess::{depth_noise, noise_scale, PreprocessedFrame};
 use sensor_io::SensorView;
 use serde::{Deserialize, Serialize};
 
@@ -263,7 +263,7 @@ impl CalibrationConfig {
         }
         let mid = noise.len() / 2;
         let (_, sigma, _) = noise.select_nth_unstable_by(mid, f64::total_cmp);
-        let scale = sigma.max(1.0).powi(2);
+        let scale = noise_scale(*sigma);
         Self {
             prior_beta: self.prior_beta * scale,
             prior_rotation: self.prior_rotation * scale,

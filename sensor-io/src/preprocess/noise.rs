@@ -12,6 +12,18 @@ pub fn depth_noise(depth: &DepthImage, mask: &Mask) -> Option<f64> {
     depth_noise_with(depth, mask, &mut Vec::new())
 }
 
+/// The factor by which a prior measured per squared millimetre of data is scaled to keep its
+/// balance against data of noise `sigma` (mm): `max(σ / 1 mm, 1)²`. Data terms are sums of
+/// squared millimetres, so noisier data outvote a fixed prior by σ²; data at or below 1 mm
+/// (quantization) keep the prior as given. Non-finite σ gives 1.
+pub fn noise_scale(sigma: f64) -> f64 {
+    if sigma.is_finite() {
+        sigma.max(1.0).powi(2)
+    } else {
+        1.0
+    }
+}
+
 /// [`depth_noise`] with a caller's scratch buffer (no allocation once it is large enough).
 pub fn depth_noise_with(depth: &DepthImage, mask: &Mask, diffs: &mut Vec<f64>) -> Option<f64> {
     const EDGE: f64 = 40.0;
@@ -86,6 +98,13 @@ mod tests {
         }
         let (d, m) = plane(0.0, 3);
         assert!(depth_noise(&d, &m).unwrap() < 1.0, "quantization only");
+    }
+
+    #[test]
+    fn noise_scale_leaves_quantization_alone() {
+        assert_eq!(noise_scale(0.3), 1.0);
+        assert_eq!(noise_scale(5.0), 25.0);
+        assert_eq!(noise_scale(f64::NAN), 1.0);
     }
 
     #[test]
