@@ -1,5 +1,6 @@
 //! One frame of joint cumulative calibration + tracking (issue 8 "Speed"): the default online
-//! calibrator (IEKF, observable β, 1 rigid + 7 iterations, PCA pose prior) on ~2500 sensor
+//! calibrator (IEKF, observable β, honline's 7 iterations of which 1 rigid, PCA pose prior; the
+//! passes recorded below before this one ran 1 rigid + 7) on ~2500 sensor
 //! points, one core, in a warm state — the belief has absorbed a few dozen frames of a bending
 //! subject, and the frame starts from the previous frame's true pose (one 30 Hz step of the
 //! bending motion: the work of a tracked frame, not of a converged one). The plain sphere-mesh

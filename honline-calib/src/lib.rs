@@ -93,5 +93,5 @@ pub use offline::{
     calibrate_offline, subsample, Offline, OfflineCalibration, OfflineConfig, OfflineError,
     OfflineIteration, SoftStart, MIN_FRAMES, SUBSAMPLING,
 };
-pub use online::{OnlineCalibrator, OnlineConfig, OnlineError, OnlineFrame};
+pub use online::{honline_schedule, OnlineCalibrator, OnlineConfig, OnlineError, OnlineFrame};
 pub use shape::{beta_error, error_subset, ShapeSubset};

@@ -149,9 +149,10 @@ struct Models {
 }
 
 impl Models {
-    /// A fresh tracker of `model` with its default (thesis) settings: 1 rigid + 7 iterations,
-    /// front-facing correspondences, m2d by rendering; the online calibrator with the joint
-    /// cumulative estimator (IEKF) over the observable β.
+    /// A fresh tracker of `model` with its default (thesis) settings: 1 rigid + 7 iterations
+    /// (the online calibrator: honline's 1 rigid + 6), front-facing correspondences, m2d by
+    /// rendering; the online calibrator with the joint cumulative estimator (IEKF) over the
+    /// observable β.
     fn tracker(&self, model: Model) -> Result<Box<dyn FrameTracker + '_>> {
         Ok(match model {
             Model::SphereMesh => Box::new(SphereMeshTracker::new(
