@@ -252,18 +252,38 @@ pub(crate) fn marginal_certainty_into(
         out.resize(n, 0.0);
         return;
     };
-    // The inverse as nalgebra's `Cholesky::inverse` forms it: the identity solved in place.
-    let inv = shaped(&mut scratch.product, n, n);
-    inv.fill_with_identity();
-    c.solve_mut(inv);
     scratch.htt = c.unpack_dirty();
-    out.extend(inv.diagonal().iter().map(|v| {
-        if v.is_finite() && *v > 0.0 {
+    let inv = shaped(&mut scratch.product, n, n);
+    inverse_factor(&scratch.htt, inv);
+    out.extend((0..n).map(|i| {
+        let v = inv.column(i).rows(i, n - i).norm_squared();
+        if v.is_finite() && v > 0.0 {
             1.0 / v
         } else {
             0.0
         }
     }));
+}
+
+/// `L⁻¹` of the lower-triangular `l` (its upper part ignored) into the lower triangle of `inv`
+/// (the upper part left unspecified), column by column by forward substitution. Then
+/// `diag((L Lᵀ)⁻¹)_i = ‖(L⁻¹)_{·i}‖²`: a sixth of the flops of solving `L Lᵀ X = I` for the whole
+/// inverse, which the certainties of every frame took before (≈ 0.1 ms a frame at 60 β).
+fn inverse_factor(l: &DMatrix<f64>, inv: &mut DMatrix<f64>) {
+    let n = l.nrows();
+    for j in 0..n {
+        let mut col = inv.column_mut(j);
+        col.rows_mut(j, n - j).fill(0.0);
+        col[j] = 1.0;
+        for k in j..n {
+            let x = col[k] / l[(k, k)];
+            col[k] = x;
+            if x != 0.0 {
+                col.rows_mut(k + 1, n - k - 1)
+                    .axpy(-x, &l.column(k).rows(k + 1, n - k - 1), 1.0);
+            }
+        }
+    }
 }
 
 #[cfg(test)]
@@ -291,7 +311,8 @@ mod tests {
     }
 
     /// The buffered forms give the bits of the textbook expressions they replaced (the online
-    /// calibrator's results must not move), reusing their buffers across sizes.
+    /// calibrator's results must not move; the certainties, read off the inverse factor, to
+    /// rounding), reusing their buffers across sizes.
     #[test]
     fn buffered_forms_match_the_textbook_expressions_bit_for_bit() {
         let mut scratch = InfoScratch::default();
@@ -323,8 +344,12 @@ mod tests {
             expected = h.clone() + DMatrix::identity(n, n) * 0.25;
             let inverse = expected.cholesky().unwrap().inverse();
             let certainty: Vec<f64> = inverse.diagonal().iter().map(|v| 1.0 / v).collect();
+            // The certainties come from the inverse factor (fewer flops, other rounding).
             marginal_certainty_into(&h, 0.25, &mut scratch, &mut diag);
-            assert_eq!(diag, certainty, "n = {n}");
+            assert_eq!(diag.len(), n);
+            for (a, b) in diag.iter().zip(&certainty) {
+                assert!((a - b).abs() <= 1e-10 * b.abs(), "n = {n}: {a} vs {b}");
+            }
         }
         // Not positive definite: zeros, and the buffers recover.
         let bad = -DMatrix::<f64>::identity(4, 4);
