@@ -54,6 +54,9 @@ pub struct Coherence {
     elements: Vec<Element>,
     /// Per element its motion `δ_e` since the last call (+∞ after a change of model).
     motions: Vec<f64>,
+    /// Per culling block of the geometry, the largest motion of its elements and the block,
+    /// largest first (see [`SphereMeshGeometry::motion_within`]).
+    block_motions: Vec<(f64, usize)>,
     /// How many points of the last call kept their element without a search.
     kept: usize,
     /// The image pixel of each track's point when the tracks were carried by pixel
@@ -226,24 +229,38 @@ impl SphereMeshGeometry {
     ) {
         assert_eq!(points.len(), out.len(), "one output slot per point");
         state.begin(&self.spheres, &self.elements, points.len());
+        self.order_block_motions(&state.motions, &mut state.block_motions);
+        let motions = Motions::new(&state.motions, &state.block_motions);
         let mut kept = 0;
-        let max_motion = state.motions.iter().copied().fold(0.0, f64::max);
         for ((p, o), track) in points.iter().zip(out.iter_mut()).zip(&mut state.tracks) {
-            kept += usize::from(self.project_tracked(p, track, &state.motions, max_motion, o));
+            kept += usize::from(self.project_tracked(p, track, &motions, o));
         }
         state.kept = kept;
     }
 
+    /// Fills `order` with the largest motion of each culling block's elements and the block,
+    /// largest first (padding lanes name no element).
+    fn order_block_motions(&self, motions: &[f64], order: &mut Vec<(f64, usize)>) {
+        order.clear();
+        order.extend((0..self.blocks.len()).map(|block| {
+            let lanes = self.blocks.elements(block).iter();
+            let largest = lanes
+                .filter_map(|&e| motions.get(e as usize))
+                .fold(0.0, |a: f64, &b| a.max(b));
+            (largest, block)
+        }));
+        order.sort_unstable_by(|a, b| b.0.total_cmp(&a.0));
+    }
+
     /// The plain projection of `p` into `out` given its memory `track` and the elements'
-    /// `motions` since `track` was set (`max_motion` the largest); updates `track` and says
-    /// whether the search was skipped.
+    /// `motions` since `track` was set; updates `track` and says whether the search was
+    /// skipped.
     #[inline]
     fn project_tracked(
         &self,
         p: &Vector3<f64>,
         track: &mut Track,
-        motions: &[f64],
-        max_motion: f64,
+        motions: &Motions<'_>,
         out: &mut Option<Projection>,
     ) -> bool {
         if !is_usable(p) {
@@ -265,13 +282,16 @@ impl SphereMeshGeometry {
         if first == seed {
             let slack = ROUNDING * (1.0 + p.abs().max() + track.margin.abs());
             let reach = track.margin - (p - track.point).norm() - slack;
-            // The largest motion of all elements first: in the late solver iterations it is
-            // small enough, and cheaper than the ball test.
-            let cheap = reach - max_motion;
+            // The largest motion of all the other elements first: in the late solver iterations
+            // it is small enough, and cheaper than the ball test. Without any motion the margin
+            // would be `reach`: below the distance the ball test cannot help.
+            let cheap = reach - motions.largest_without(seed);
             let margin = if pr.distance < cheap {
                 cheap
+            } else if pr.distance < reach {
+                reach - self.motion_within(p, reach, seed, motions, pr.distance)
             } else {
-                reach - self.motion_within(p, reach, seed, motions)
+                reach
             };
             if pr.distance < margin {
                 *track = Track {
@@ -301,26 +321,158 @@ impl SphereMeshGeometry {
 
     /// The largest motion of the elements other than `skip` whose bounding balls may come
     /// within `reach` of `p` (the widened `f32` test of the search: a superset of them); 0 when
-    /// none, +∞ for an infinite `reach` bound that keeps them all.
+    /// none, +∞ for an infinite `reach` bound that keeps them all. Blocks whose elements all
+    /// moved less than the largest motion found so far cannot change it and are not tested
+    /// (largest first). The caller keeps `skip` only if `distance < reach − motion`: once that
+    /// fails the value is not needed and the scan stops early with a motion that fails it too.
     #[inline]
-    fn motion_within(&self, p: &Vector3<f64>, reach: f64, skip: usize, motions: &[f64]) -> f64 {
+    fn motion_within(
+        &self,
+        p: &Vector3<f64>,
+        reach: f64,
+        skip: usize,
+        motions: &Motions<'_>,
+        distance: f64,
+    ) -> f64 {
         if !reach.is_finite() {
             return f64::INFINITY;
         }
         let query = self.blocks.query(p);
         let mut worst: f64 = 0.0;
-        for block in 0..self.blocks.len() {
+        for &(block_motion, block) in motions.blocks {
+            if block_motion <= worst {
+                break;
+            }
             let mut mask = self.blocks.survivors(&query, block, reach);
             let lanes = self.blocks.elements(block);
             while mask != 0 {
                 let e = lanes[mask.trailing_zeros() as usize] as usize;
                 mask &= mask - 1;
-                if e != skip {
-                    // A padding lane (kept only on overflow) names no element: assume the worst.
-                    worst = worst.max(motions.get(e).copied().unwrap_or(f64::INFINITY));
+                // A padding lane (kept only on overflow) names no element and bounds nothing.
+                if let Some(&m) = motions.per_element.get(e).filter(|_| e != skip) {
+                    worst = worst.max(m);
                 }
+            }
+            if distance >= reach - worst {
+                return worst;
             }
         }
         worst
+    }
+}
+
+/// The elements' motions since the last call of [`SphereMeshGeometry::project_points_coherent`],
+/// summarised for the keep test of `project_tracked`.
+struct Motions<'a> {
+    /// Per element its motion `δ_e`.
+    per_element: &'a [f64],
+    /// The element that moved most and its motion.
+    largest: (usize, f64),
+    /// The largest motion of the other elements.
+    second: f64,
+    /// Per culling block the largest motion of its elements and the block, largest first.
+    blocks: &'a [(f64, usize)],
+}
+
+impl<'a> Motions<'a> {
+    fn new(per_element: &'a [f64], blocks: &'a [(f64, usize)]) -> Self {
+        let mut largest = (usize::MAX, 0.0);
+        let mut second: f64 = 0.0;
+        for (e, &m) in per_element.iter().enumerate() {
+            if m > largest.1 {
+                second = largest.1;
+                largest = (e, m);
+            } else {
+                second = second.max(m);
+            }
+        }
+        Self {
+            per_element,
+            largest,
+            second,
+            blocks,
+        }
+    }
+
+    /// The largest motion of the elements other than `e`: a point's own element does not
+    /// bound how near the others came (a fingertip point's element moves most).
+    #[inline]
+    fn largest_without(&self, e: usize) -> f64 {
+        if e == self.largest.0 {
+            self.second
+        } else {
+            self.largest.1
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A chain of `n` pills along x, sphere `i` at `x = 10 i`.
+    fn chain(n: usize) -> (Vec<Sphere>, Vec<Element>) {
+        let spheres = (0..=n)
+            .map(|i| Sphere::new(Vector3::new(10.0 * i as f64, 0.0, 0.0), 3.0))
+            .collect();
+        let elements = (0..n as u32).map(|i| Element::Pill([i, i + 1])).collect();
+        (spheres, elements)
+    }
+
+    #[test]
+    fn largest_motion_without_an_element() {
+        let m = Motions::new(&[1.0, 5.0, 3.0, 5.0], &[]);
+        assert_eq!(m.largest_without(1), 5.0); // the tie at element 3
+        let m = Motions::new(&[1.0, 5.0, 3.0], &[]);
+        assert_eq!((m.largest_without(1), m.largest_without(0)), (3.0, 5.0));
+        let m = Motions::new(&[f64::INFINITY, f64::INFINITY], &[]);
+        assert_eq!(m.largest_without(0), f64::INFINITY);
+        let m = Motions::new(&[0.0, 0.0], &[]);
+        assert_eq!((m.largest_without(0), m.largest_without(1)), (0.0, 0.0));
+    }
+
+    #[test]
+    fn block_motions_are_the_lane_maxima_largest_first() {
+        let (spheres, elements) = chain(20);
+        let g = SphereMeshGeometry::new(&spheres, &elements).unwrap();
+        let motions: Vec<f64> = (0..elements.len()).map(|e| (e * 7 % 11) as f64).collect();
+        let mut order = Vec::new();
+        g.order_block_motions(&motions, &mut order);
+        let mut blocks: Vec<usize> = order.iter().map(|&(_, b)| b).collect();
+        blocks.sort_unstable();
+        assert_eq!(blocks, (0..g.blocks.len()).collect::<Vec<_>>());
+        assert!(order.windows(2).all(|w| w[0].0 >= w[1].0));
+        for &(m, b) in &order {
+            let lanes = g.blocks.elements(b).iter();
+            let expected = lanes
+                .filter_map(|&e| motions.get(e as usize))
+                .fold(0.0, |a: f64, &x| a.max(x));
+            assert_eq!(m, expected);
+        }
+    }
+
+    /// One end of the chain swings (a bending fingertip) while the rest stays: the points of
+    /// the still elements keep them, and every answer is the fresh one.
+    #[test]
+    fn a_swinging_end_keeps_the_still_elements_points() {
+        let (mut spheres, elements) = chain(20);
+        let mut g = SphereMeshGeometry::new(&spheres, &elements).unwrap();
+        let points: Vec<Vector3<f64>> = (0..400)
+            .map(|i| {
+                let t = i as f64 * 0.5;
+                Vector3::new(t, 4.0 + (i % 5) as f64, (i % 3) as f64 - 1.0)
+            })
+            .collect();
+        let mut state = Coherence::default();
+        let (mut out, mut fresh) = (vec![None; points.len()], vec![None; points.len()]);
+        g.project_points_coherent(&points, &mut state, &mut out);
+        for step in 1..6 {
+            spheres[20].center.y += 2.0 * step as f64;
+            g.update(&spheres).unwrap();
+            g.project_points_coherent(&points, &mut state, &mut out);
+            g.project_points(&points, &mut fresh);
+            assert_eq!(out, fresh);
+            assert!(state.kept() > points.len() * 3 / 4, "{}", state.kept());
+        }
     }
 }
