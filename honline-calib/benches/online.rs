@@ -138,6 +138,16 @@
 //! (≈ 0.93 on the three best of each), in-process `track` 6.25 / 6.56 / 6.67 ms against 6.07 /
 //! 6.24 ms (≈ 0.95; it now includes measuring the depth noise every 15th frame for the
 //! noise-scaled shape prior) — ≈ 160 frames/s.
+//!
+//! Then (session 8): (1) honline's schedule, 7 iterations of which 1 rigid
+//! ([`honline_calib::honline_schedule`]; the Ch. 3 baseline below keeps hmodel's 8); (2) the
+//! marginal certainties from the inverse Cholesky factor (`filter` 253–307 → 80–113 µs);
+//! (3) the coherence keep test against the largest motion of the other elements (branch
+//! `speed11`, answers bit for bit unchanged). On a quiet moment, pinned, the 8-iteration
+//! binary then the 7-iteration one: `track` 6 070–6 240 → 5 480–5 530 µs, criterion 5.89 ms
+//! (≈ 180 frames/s in-process). Later alternations of the binaries before and after (3)
+//! ran while the machine slowed for identical code (`solve` 1.4 → 2.4 ms): `track` 6 130–8 470
+//! against 5 690–7 940 µs — inconclusive. The goal of 200 frames/s is **still not met**.
 
 #[path = "../tests/common/mod.rs"]
 mod common;
