@@ -8,13 +8,14 @@
 
 use std::f64::consts::TAU;
 
+use datasets::subjects::{Subject, MAX_PERTURBATION};
 use hand_model::kinematics::{Pose, Skeleton};
 use hand_model::solver::PcaPrior;
 use hand_model::spheremesh::{default_right_hand, ShapeBasis, ShapeKind};
 use hmodel_spheremesh::{Tracker, TrackerConfig};
 use honline_calib::terms::finger_order_constraints;
 use honline_calib::{
-    beta_error, calibrate_offline, error_subset, subsample, OfflineConfig, OnlineCalibrator,
+    beta_error, calibrate_offline_from, error_subset, subsample, OfflineConfig, OnlineCalibrator,
     OnlineConfig, SUBSAMPLING,
 };
 use rand::{Rng, SeedableRng};
@@ -54,39 +55,73 @@ pub fn size_subset(basis: &ShapeBasis) -> Vec<usize> {
         .collect()
 }
 
-/// A subject for Fig. 4.7 (thesis §4.4.3, "drawn from N(β̄, σ)"): the default template's
-/// honline β with every entry of [`size_subset`] multiplied by `1 + σξ`, ξ ~ N(0, 1) truncated
-/// at ±2.5, redrawn while it leaves the β bounds; the whole draw is redrawn while the basis
-/// refuses it or it breaks a finger-order constraint of Eq. 4.15. The other entries keep the
-/// template values. Deterministic in `seed`; an error for a σ outside [0, 1] or when 1000 draws
-/// fail.
+/// A subject for the tracking experiments (the acceptance's "random subject"): the default
+/// template's honline β with every entry of [`size_subset`] multiplied by `1 + σξ`, ξ ~ N(0, 1)
+/// truncated at ±2.5, redrawn while it leaves the β bounds; the whole draw is redrawn while the
+/// basis refuses it or it breaks a finger-order constraint of Eq. 4.15. The other entries keep
+/// the template values. Deterministic in `seed`; an error for a σ outside [0, 1] or when 1000
+/// draws fail.
 pub fn perturbed_subject(sigma: f64, seed: u64) -> anyhow::Result<Vec<f64>> {
+    let basis = ShapeBasis::honline(&default_right_hand())?;
+    perturbed_shape(&basis.template_values(), sigma, seed)
+}
+
+/// `center` (an honline β) with its [`size_subset`] entries perturbed as [`perturbed_subject`]
+/// perturbs the default template's.
+pub fn perturbed_shape(center: &[f64], sigma: f64, seed: u64) -> anyhow::Result<Vec<f64>> {
     anyhow::ensure!(
         (0.0..=1.0).contains(&sigma),
         "σ must be in [0, 1], got {sigma}"
     );
     let base = default_right_hand();
     let basis = ShapeBasis::honline(&base)?;
+    anyhow::ensure!(
+        center.len() == basis.len(),
+        "{} shape values for {} parameters",
+        center.len(),
+        basis.len()
+    );
     let subset = size_subset(&basis);
     let constraints = finger_order_constraints(&basis);
     let mut rng = ChaCha8Rng::seed_from_u64(seed ^ 0x4F37_A9C1_0D2E_6B58);
     for _ in 0..1000 {
-        let mut beta = basis.template_values();
+        let mut beta = center.to_vec();
         for &i in &subset {
-            let p = &basis.params[i];
-            let [lo, hi] = p.limits.unwrap_or([f64::NEG_INFINITY, f64::INFINITY]);
+            let [lo, hi] = basis.params[i]
+                .limits
+                .unwrap_or([f64::NEG_INFINITY, f64::INFINITY]);
             let v = (0..100).find_map(|_| {
                 let xi = standard_normal(&mut rng);
-                let v = p.template_value * (1.0 + sigma * xi);
+                let v = center[i] * (1.0 + sigma * xi);
                 (xi.abs() <= MAX_SIGMAS && (lo..=hi).contains(&v)).then_some(v)
             });
-            beta[i] = v.unwrap_or(p.template_value);
+            beta[i] = v.unwrap_or(center[i]);
         }
         if basis.apply(&base, &beta).is_ok() && constraints.iter().all(|c| c.value(&beta) >= 0.0) {
             return Ok(beta);
         }
     }
-    anyhow::bail!("no valid subject at σ = {sigma} from seed {seed}")
+    anyhow::bail!("no valid shape at σ = {sigma} from seed {seed}")
+}
+
+/// One draw of Fig. 4.7 (thesis §4.4.3): the depth maps are rendered from a user's known shape
+/// β̄ and the calibration starts from "random initializations … drawn from N(β̄, σ)".
+#[derive(Clone, Debug, PartialEq)]
+pub struct Fig47Draw {
+    /// The user's shape β̄: a random subject of `datasets` (latent height/width/thickness and
+    /// ±6 % per parameter, a plausible hand; the thesis' user is a real, scanned hand).
+    pub user: Vec<f64>,
+    /// The initialization: `user` perturbed by σ ([`perturbed_shape`]).
+    pub start: Vec<f64>,
+}
+
+impl Fig47Draw {
+    /// Draw `seed` at `sigma`; an error for a σ outside [0, 1].
+    pub fn new(sigma: f64, seed: u64) -> anyhow::Result<Self> {
+        let user = Subject::random(seed, MAX_PERTURBATION)?.beta;
+        let start = perturbed_shape(&user, sigma, seed)?;
+        Ok(Self { user, start })
+    }
 }
 
 /// The teaser-like motion of the synthetic calibration experiments (thesis §4.4.2 animates the
@@ -262,17 +297,21 @@ pub fn calibration_sequence(
 }
 
 /// Track subject `truth` (honline β) moving as `motion` with the online calibrator (`config`,
-/// the default PCA pose prior) starting from the default template and the true first pose
-/// (thesis §4.4.2: "initialized in the first frame by θ̄_0").
+/// the default PCA pose prior) starting from the shape `start` (`None`: the default template)
+/// and the true first pose (thesis §4.4.2: "initialized in the first frame by θ̄_0").
 pub fn run_online(
     spec: &SyntheticSpec,
     truth: &[f64],
+    start: Option<&[f64]>,
     motion: &CalibrationMotion,
     config: OnlineConfig,
 ) -> anyhow::Result<OnlineRun> {
     let base = default_right_hand();
     let prior = PcaPrior::project_default();
     let mut calib = OnlineCalibrator::new(&base, config, Some(&prior))?;
+    if let Some(beta) = start {
+        calib.set_shape(beta)?;
+    }
     calib.set_pose(&motion.pose_at(0.0))?;
     let mut seq = calibration_sequence(spec, truth, motion)?;
     let mut frames = Vec::with_capacity(spec.frames);
@@ -290,7 +329,7 @@ pub fn run_online(
         run,
         truth: truth.to_vec(),
         subset: size_subset(calib.basis()),
-        template: calib.basis().template_values(),
+        template: start.map_or_else(|| calib.basis().template_values(), <[f64]>::to_vec),
     })
 }
 
@@ -316,18 +355,25 @@ impl OfflineRun {
 }
 
 /// Calibrate subject `truth` moving as `motion` offline as `hands calibrate --method
-/// offline-hard|offline-soft` does: the sequence is tracked with the Ch. 3 tracker on the default
-/// template from the true first pose, the tracked frames are sub-sampled at 1/[`SUBSAMPLING`]
-/// (§4.3.4) and β is fitted jointly with their poses (`config.method` says Hard or Soft).
+/// offline-hard|offline-soft` does: the sequence is tracked with the Ch. 3 tracker on the
+/// template of shape `start` (`None`: the default template) from the true first pose, the
+/// tracked frames are sub-sampled at 1/[`SUBSAMPLING`] (§4.3.4) and β is fitted jointly with
+/// their poses from `start` (`config.method` says Hard or Soft).
 pub fn run_offline(
     spec: &SyntheticSpec,
     truth: &[f64],
+    start: Option<&[f64]>,
     motion: &CalibrationMotion,
     config: &OfflineConfig,
 ) -> anyhow::Result<OfflineRun> {
     let base = default_right_hand();
+    let basis = ShapeBasis::honline(&base)?;
+    let initial = match start {
+        Some(beta) => basis.apply(&base, beta)?,
+        None => base.clone(),
+    };
     let prior = PcaPrior::project_default();
-    let mut tracker = Tracker::new(&base, config.frame.tracker.clone(), Some(&prior))?;
+    let mut tracker = Tracker::new(&initial, config.frame.tracker.clone(), Some(&prior))?;
     tracker.set_pose(&motion.pose_at(0.0))?;
     let mut seq = calibration_sequence(spec, truth, motion)?;
     let sk = &base.skeleton;
@@ -359,8 +405,7 @@ pub fn run_offline(
         "offline frame choice disagrees with honline_calib::subsample"
     );
     let kept: Vec<PreprocessedFrame> = frames.into_iter().map(|(_, f)| f).collect();
-    let cal = calibrate_offline(&base, &kept, &poses, config, Some(&prior))?;
-    let basis = ShapeBasis::honline(&base)?;
+    let cal = calibrate_offline_from(&base, start, &kept, &poses, config, Some(&prior))?;
     Ok(OfflineRun {
         beta: cal.beta,
         truth: truth.to_vec(),

@@ -35,7 +35,7 @@ use std::sync::OnceLock;
 
 use eval::online::{
     last_third_error, perturbed_subject, run_offline, run_online, run_true_template,
-    CalibrationMotion, OnlineRun,
+    CalibrationMotion, Fig47Draw, OnlineRun,
 };
 use eval::plot::{line_plot_svg, Series};
 use eval::synthetic::SyntheticSpec;
@@ -95,12 +95,13 @@ fn draw(sigma: f64, seed: u64, estimator: Estimator, frames: usize) -> Draw {
 }
 
 fn draw_with(sigma: f64, seed: u64, estimator: Estimator, frames: usize, noise: &str) -> Draw {
-    let truth = perturbed_subject(sigma, seed).unwrap();
+    let fig = Fig47Draw::new(sigma, seed).unwrap();
     let motion = CalibrationMotion::new(&default_right_hand().skeleton, 0.0, seed);
     let t = std::time::Instant::now();
     let r = run_online(
         &spec(noise, frames, seed),
-        &truth,
+        &fig.user,
+        Some(&fig.start),
         &motion,
         config(estimator),
     )
@@ -169,17 +170,24 @@ fn fig_4_7_split_and_per_frame_beside_it() {
 }
 
 /// One Offline-Hard or Offline-Soft draw (frames sub-sampled at 1/20 from a tracking pass with
-/// the default template): `(E_β start, E_β end)` in mm.
+/// the draw's initial template): `(E_β start, E_β end)` in mm.
 fn offline_draw(sigma: f64, seed: u64, method: Offline, frames: usize) -> (f64, f64) {
-    let truth = perturbed_subject(sigma, seed).unwrap();
+    let fig = Fig47Draw::new(sigma, seed).unwrap();
     let motion = CalibrationMotion::new(&default_right_hand().skeleton, 0.0, seed);
     let config = OfflineConfig {
         method,
         ..OfflineConfig::default()
     };
     let t = std::time::Instant::now();
-    let r = run_offline(&spec("none", frames, seed), &truth, &motion, &config).unwrap();
-    let start = honline_calib::beta_error(&basis().template_values(), &truth, &r.subset);
+    let r = run_offline(
+        &spec("none", frames, seed),
+        &fig.user,
+        Some(&fig.start),
+        &motion,
+        &config,
+    )
+    .unwrap();
+    let start = honline_calib::beta_error(&fig.start, &fig.user, &r.subset);
     let end = r.end_error();
     println!(
         "fig 4.7 none σ={sigma:.1} draw {seed} offline-{}: E_β {start:.3} → {end:.3} mm from {} frames, batch {:.1} s, total {:.1} s",
@@ -215,6 +223,7 @@ fn uncooperative() -> &'static OnlineRun {
         run_online(
             &spec("none", STRAIGHT + 180, 1),
             &truth,
+            None,
             &motion,
             config(Estimator::Iekf),
         )
@@ -372,7 +381,7 @@ fn tracking(noise: &str, frames: usize, seed: u64) -> (f64, f64, f64, f64) {
         .beta;
     let motion = CalibrationMotion::new(&default_right_hand().skeleton, 0.0, seed);
     let s = spec(noise, frames, seed);
-    let online = run_online(&s, &truth, &motion, config(Estimator::Iekf)).unwrap();
+    let online = run_online(&s, &truth, None, &motion, config(Estimator::Iekf)).unwrap();
     let reference = run_true_template(&s, &truth, &motion, TrackerConfig::default()).unwrap();
     let (a, b) = (last_third_error(&online.run), last_third_error(&reference));
     let median_certainty = {

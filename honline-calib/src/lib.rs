@@ -90,8 +90,8 @@ pub use display::element_uncertainty;
 pub use filter::{marginal_certainty, marginal_information, Estimator, ShapeBelief};
 pub use guide::{guide, Guidance};
 pub use offline::{
-    calibrate_offline, subsample, Offline, OfflineCalibration, OfflineConfig, OfflineError,
-    OfflineIteration, SoftStart, MIN_FRAMES, SUBSAMPLING,
+    calibrate_offline, calibrate_offline_from, subsample, Offline, OfflineCalibration,
+    OfflineConfig, OfflineError, OfflineIteration, SoftStart, MIN_FRAMES, SUBSAMPLING,
 };
 pub use online::{honline_schedule, OnlineCalibrator, OnlineConfig, OnlineError, OnlineFrame};
 pub use shape::{beta_error, error_subset, ShapeSubset};

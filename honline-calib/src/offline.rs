@@ -526,6 +526,7 @@ fn finite_frames(
 /// frame's solve fails).
 fn per_frame_start(
     base: &SphereMeshTemplate,
+    from_start: bool,
     config: &OfflineConfig,
     prior: Option<&PcaPrior>,
     frames: &[PreprocessedFrame],
@@ -536,6 +537,9 @@ fn per_frame_start(
         ..config.frame.clone()
     };
     let mut calib = OnlineCalibrator::new(base, online, prior)?;
+    if from_start {
+        calib.set_shape(&state.shared)?;
+    }
     let mut beta = state.shared.clone();
     for (f, frame) in frames.iter().enumerate() {
         calib.set_pose(&state.poses[f])?;
@@ -551,7 +555,7 @@ fn per_frame_start(
 
 /// Offline-Hard or Offline-Soft calibration of `base` ([`OfflineConfig::method`], module docs)
 /// on `frames` (already sub-sampled, e.g. by [`subsample`]) from the tracked `poses`, with an
-/// optional PCA pose prior (as the tracker's).
+/// optional PCA pose prior (as the tracker's), starting from the base template's shape.
 ///
 /// Errors: fewer than [`MIN_FRAMES`] frames, a pose count or pose that does not match, a frame
 /// without a hand (fewer than `min_points` finite points), invalid settings, a template without
@@ -564,7 +568,22 @@ pub fn calibrate_offline(
     config: &OfflineConfig,
     prior: Option<&PcaPrior>,
 ) -> Result<OfflineCalibration, OfflineError> {
-    let start = Instant::now();
+    calibrate_offline_from(base, None, frames, poses, config, prior)
+}
+
+/// [`calibrate_offline`] starting from the shape `start` (all entries of the basis, mm; `None`:
+/// the base template's), e.g. the perturbed initializations of thesis §4.4.3. The shape-space
+/// prior and the β bounds stay the base template's. A `start` of the wrong length or that the
+/// basis refuses is an [`OfflineError::Config`].
+pub fn calibrate_offline_from(
+    base: &SphereMeshTemplate,
+    start: Option<&[f64]>,
+    frames: &[PreprocessedFrame],
+    poses: &[Pose],
+    config: &OfflineConfig,
+    prior: Option<&PcaPrior>,
+) -> Result<OfflineCalibration, OfflineError> {
+    let clock = Instant::now();
     config.validate()?;
     if frames.len() != poses.len() {
         return Err(OfflineError::PoseCount {
@@ -591,7 +610,18 @@ pub fn calibrate_offline(
     }
     let frames = finite_frames(frames, config.frame.min_points.max(1))?;
     let problem = FrameProblem::new(base, &config.frame, prior)?;
-    let template_beta = problem.basis.template_values();
+    let mut template_beta = problem.basis.template_values();
+    if let Some(beta) = start {
+        let mut beta = beta.to_vec();
+        if beta.len() != template_beta.len() || !problem.project(&mut beta) {
+            return Err(OfflineError::Config(format!(
+                "the start shape ({} values for {} parameters) is not a valid model",
+                beta.len(),
+                template_beta.len()
+            )));
+        }
+        template_beta = beta;
+    }
     let n = frames.len();
     let mut state = State {
         poses: poses.to_vec(),
@@ -600,7 +630,7 @@ pub fn calibrate_offline(
         shared: template_beta.clone(),
     };
     if config.method == Offline::Soft && config.soft_start == SoftStart::PerFrame {
-        per_frame_start(base, config, prior, &frames, &mut state)?;
+        per_frame_start(base, start.is_some(), config, prior, &frames, &mut state)?;
         // β⁰: the mean of the β_n⁰ (valid: the bounds and barriers are convex), the template
         // should the basis refuse it.
         let mut mean = template_beta.clone();
@@ -698,7 +728,7 @@ pub fn calibrate_offline(
         poses: state.poses,
         initial_energy,
         iterations: records,
-        seconds: start.elapsed().as_secs_f64(),
+        seconds: clock.elapsed().as_secs_f64(),
     })
 }
 

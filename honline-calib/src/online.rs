@@ -338,6 +338,48 @@ impl OnlineCalibrator {
         Ok(())
     }
 
+    /// Start from the shape `beta` (all entries of the basis, mm) instead of the base template:
+    /// a previous session's estimate, or the perturbed initializations of thesis §4.4.3 ("random
+    /// initializations … drawn from N(β̄, σ)"). The estimate restarts at `beta` with the vague
+    /// initial information; the shape-space prior (Eq. 4.14) and the β bounds stay those of the
+    /// base template. An error, leaving the calibrator unchanged, for the wrong length, a
+    /// non-finite entry or a shape the basis refuses; entries beyond the β bounds are clamped.
+    pub fn set_shape(&mut self, beta: &[f64]) -> Result<(), OnlineError> {
+        let basis = &self.problem.basis;
+        let invalid = |reason: String| {
+            OnlineError::Model(ModelError::InvalidArgument {
+                name: "beta",
+                reason,
+            })
+        };
+        if beta.len() != basis.len() {
+            return Err(invalid(format!(
+                "{} shape values for {} parameters",
+                beta.len(),
+                basis.len()
+            )));
+        }
+        let mut next = beta.to_vec();
+        if !self.problem.project(&mut next) {
+            return Err(invalid("not a valid model of the basis".into()));
+        }
+        let template = basis.apply(&self.problem.base, &next)?;
+        self.ctx.tracking.set_template(template)?;
+        let mean: Vec<f64> = self
+            .problem
+            .layout
+            .active
+            .iter()
+            .map(|&i| next[i])
+            .collect();
+        self.belief = ShapeBelief::vague(&mean, self.config.initial_information);
+        self.ctx.beta.clone_from(&next);
+        self.ctx.dirty = false;
+        self.next = next;
+        self.temporal.clear_history();
+        Ok(())
+    }
+
     /// The mean pose moved so that the model's sphere centroid sits 10 mm behind the points'
     /// centroid (the first frame without [`OnlineCalibrator::set_pose`]).
     fn placed_pose(&self, points: &[Vector3<f64>]) -> Pose {

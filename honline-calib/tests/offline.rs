@@ -14,8 +14,9 @@ use hand_model::spheremesh::{default_right_hand, ShapeBasis, SphereMeshTemplate}
 use hmodel_spheremesh::synthetic::rendered_frame;
 use hmodel_spheremesh::{Tracker, TrackerConfig};
 use honline_calib::{
-    beta_error, calibrate_offline, error_subset, subsample, Estimator, Offline, OfflineCalibration,
-    OfflineConfig, OfflineError, OnlineCalibrator, OnlineConfig, SoftStart, SUBSAMPLING,
+    beta_error, calibrate_offline, calibrate_offline_from, error_subset, subsample, Estimator,
+    Offline, OfflineCalibration, OfflineConfig, OfflineError, OnlineCalibrator, OnlineConfig,
+    SoftStart, SUBSAMPLING,
 };
 use sensor_io::preprocess::PreprocessedFrame;
 use sensor_io::Camera;
@@ -292,6 +293,15 @@ fn bad_input_is_an_error() {
         run(&two, &poses, &bad_config),
         Err(OfflineError::Config(_))
     ));
+    let short = vec![1.0; 3];
+    let mut nan = ShapeBasis::honline(&base).unwrap().template_values();
+    nan[0] = f64::NAN;
+    for start in [&short, &nan] {
+        assert!(matches!(
+            calibrate_offline_from(&base, Some(start), &two, &poses, &soft, None),
+            Err(OfflineError::Config(_))
+        ));
+    }
     // Two identical frames are valid input: the result is a valid model.
     for method in [Offline::Hard, Offline::Soft] {
         let cal = run(

@@ -167,3 +167,53 @@ fn depth_noise_is_measured_on_the_frames() {
         }
     }
 }
+
+/// `set_shape` starts the estimate from a given shape (thesis §4.4.3's perturbed
+/// initializations): the template and the first frame's estimate begin there, not at the base
+/// template; a shape of the wrong length or with a NaN is an error that leaves the calibrator
+/// as it was, and entries beyond the β bounds are clamped to a valid model.
+#[test]
+fn set_shape_starts_from_the_given_shape() {
+    let base = default_right_hand();
+    let (truth_beta, truth) = subject(&base, 0.1, 3);
+    let (start, _) = subject(&base, 0.2, 4);
+    let mut calib = OnlineCalibrator::new(&base, OnlineConfig::default(), None).unwrap();
+    let template = calib.template().clone();
+    let mut nan = start.clone();
+    nan[0] = f64::NAN;
+    let mut negative = start.clone();
+    negative.iter_mut().for_each(|b| *b = -*b);
+    for bad in [&start[1..], &nan[..]] {
+        assert!(calib.set_shape(bad).is_err());
+        assert_eq!(calib.template(), &template);
+    }
+    let basis = calib.basis().clone();
+    calib.set_shape(&negative).unwrap();
+    for (j, &i) in calib.layout().active.iter().enumerate() {
+        if let Some([lo, hi]) = basis.params[i].limits {
+            assert!(
+                (lo..=hi).contains(&calib.belief().mean[j]),
+                "{}",
+                basis.params[i].name
+            );
+        }
+    }
+    calib.set_shape(&start).unwrap();
+    assert_eq!(calib.template(), &basis.apply(&base, &start).unwrap());
+    let subset = error_subset(&basis);
+    calib.set_pose(&pose(&truth, 0, true)).unwrap();
+    let frame =
+        rendered_frame(&truth, &pose(&truth, 0, true), &Camera::sr300_qvga(), 1500).unwrap();
+    // A frame without a hand keeps the estimate at the start; a rendered one moves it toward
+    // the subject.
+    let out = calib.track(&PreprocessedFrame::default(), 0, 0.0);
+    assert!(!out.solved);
+    assert_eq!(out.beta, start);
+    let out = calib.track(&frame, 1, 0.0);
+    assert!(out.solved);
+    let (before, after) = (
+        beta_error(&start, &truth_beta, &subset),
+        beta_error(&out.beta, &truth_beta, &subset),
+    );
+    assert!(after < before, "E_β {before} → {after}");
+}

@@ -81,7 +81,7 @@ fn estimators(
             estimator: e,
             ..OnlineConfig::default()
         };
-        let r = run_online(spec, truth, motion, config)?;
+        let r = run_online(spec, truth, None, motion, config)?;
         writeln!(
             md,
             "| online {e} | {:.3} | {:.3} | {:.2} | {:.1} |",
@@ -104,7 +104,7 @@ fn estimators(
             method,
             ..OfflineConfig::default()
         };
-        let r = run_offline(spec, truth, motion, &config)?;
+        let r = run_offline(spec, truth, None, motion, &config)?;
         writeln!(
             md,
             "| {name} ({} frames at 1/20) | {:.3} | {:.3} | — | {:.1} |",
