@@ -1,5 +1,6 @@
 //! Synthetic experiments of the online calibration (thesis §4.4.2–4.4.3, issue 8): subjects
-//! drawn at a relative perturbation σ from the default template (Fig. 4.7), a teaser-like
+//! drawn at a relative perturbation σ from the default template, the draws of Fig. 4.7 (a
+//! user's shape and an initialization perturbed from it by σ, [`Fig47Draw`]), a teaser-like
 //! motion — every digit bending with its own period and phase while the hand turns, optionally
 //! held straight first (the "uncooperative user" of §4.4.3) — and runners that track such a
 //! sequence (rendered, sensor-modelled and preprocessed by [`SyntheticSequence`]) with the
@@ -108,8 +109,10 @@ pub fn perturbed_shape(center: &[f64], sigma: f64, seed: u64) -> anyhow::Result<
 /// β̄ and the calibration starts from "random initializations … drawn from N(β̄, σ)".
 #[derive(Clone, Debug, PartialEq)]
 pub struct Fig47Draw {
-    /// The user's shape β̄: a random subject of `datasets` (latent height/width/thickness and
-    /// ±6 % per parameter, a plausible hand; the thesis' user is a real, scanned hand).
+    /// The user's shape β̄: a random subject of `datasets` at its largest perturbation (latent
+    /// height/width/thickness, then up to ±25 % per parameter, within the human hand-length
+    /// range) — a hand unlike the default template, as the thesis' user (a scanned real hand)
+    /// is; the shape-space prior (Eq. 4.14) stays anchored on the default template.
     pub user: Vec<f64>,
     /// The initialization: `user` perturbed by σ ([`perturbed_shape`]).
     pub start: Vec<f64>,
