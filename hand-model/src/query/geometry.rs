@@ -403,11 +403,14 @@ impl SphereMeshGeometry {
     /// and the evaluation order: seeds and gaps change the cost, never the result.
     ///
     /// A positive `gap` evaluates the elements within `gap` of the minimum as well, which makes
-    /// [`Search::margin`] a lower bound that lasts (see `coherence.rs`).
+    /// [`Search::margin`] a lower bound that lasts (see `coherence.rs`), and names the nearest of
+    /// them other than the minimum's as [`Search::runner`].
     pub(super) fn search(&self, p: &Vector3<f64>, first: usize, mut best: f64, gap: f64) -> Search {
         let mut best_e = first;
-        // The smallest value seen of another element than `best_e`: its `φ_e` or a lower bound.
-        let mut second = f64::INFINITY;
+        // The smallest value seen of another element than `best_e` (its `φ_e` or a lower bound)
+        // and that element; and the smallest value seen of the elements other than these two.
+        let mut second = (f64::INFINITY, usize::MAX);
+        let mut third = f64::INFINITY;
         let query = self.blocks.query(p);
         for block in 0..self.blocks.len() {
             let mut mask = self.blocks.survivors(&query, block, best + gap);
@@ -426,19 +429,30 @@ impl SphereMeshGeometry {
                 }
                 let d = frame.distance_below(p, best + gap);
                 if d < best || (d == best && e < best_e) {
-                    second = second.min(best);
+                    third = third.min(second.0);
+                    second = (best, best_e);
                     best = d;
                     best_e = e;
+                } else if d < second.0 {
+                    third = third.min(second.0);
+                    second = (d, e);
                 } else {
-                    second = second.min(d);
+                    third = third.min(d);
                 }
             }
         }
+        // Skipped elements and those `distance_below` bounded are above the culling bound of
+        // their time, never below the final `best + gap`: a second value within it is exact.
+        let cap = best + gap;
+        let (runner, margin) = if second.0 <= cap && second.1 < self.frames.len() {
+            (Some(second.1), third.min(cap))
+        } else {
+            (None, second.0.min(cap))
+        };
         Search {
             nearest: (best_e, best),
-            // Skipped elements and those `distance_below` bounded are above the culling bound
-            // of their time, never below the final `best + gap`.
-            margin: second.min(best + gap),
+            runner,
+            margin,
         }
     }
 
@@ -456,8 +470,11 @@ impl SphereMeshGeometry {
 pub(super) struct Search {
     /// The element minimising `φ_e(p)`, and that minimum.
     pub(super) nearest: (usize, f64),
-    /// A lower bound of `φ_e(p)` over every other element `e`, at least the minimum (equal to
-    /// it with a zero gap when another element ties).
+    /// The nearest element other than the minimum's when it is within the gap of the minimum
+    /// (its `φ_e(p)` was evaluated exactly).
+    pub(super) runner: Option<usize>,
+    /// A lower bound of `φ_e(p)` over every element `e` other than the minimum's and the
+    /// runner, at least the minimum (equal to it with a zero gap when another element ties).
     pub(super) margin: f64,
 }
 
