@@ -27,7 +27,9 @@
 //! the margin bounds every element but the winner and the runner (the third smallest distance,
 //! capped), and the keep test evaluates the runner exactly (one element instead of a search).
 //! In the online bench this cut the full searches by a third (≈ 7 000 → 4 800 a frame, 92 %
-//! of them still finding the same element).
+//! of them still finding the same element). The runner's distance is remembered too, as a
+//! lower bound that its own motion and the point's wear down: it is evaluated again only
+//! when that bound no longer clears the winner.
 //!
 //! The keep test bounds the other elements' motion in three tiers, cheapest first: the largest
 //! motion of all of them; the largest motion of the element's neighbours (precomputed per
@@ -107,6 +109,10 @@ struct Track {
     /// The runner-up of the last search ([`NO_SEED`] for none): evaluated exactly by the keep
     /// test instead of being bounded by the margin.
     runner: u32,
+    /// A lower bound of the runner's `φ_e(point)` at the last call's spheres: the runner is
+    /// evaluated again only when this less its motion and the point's no longer clears the
+    /// winner.
+    runner_margin: f64,
     /// A lower bound of `φ_e(point)` over every element `e` but `element` and `runner` at the
     /// last call's spheres.
     margin: f64,
@@ -130,6 +136,7 @@ impl Track {
     const NONE: Self = Self {
         element: NO_SEED,
         runner: NO_SEED,
+        runner_margin: f64::NEG_INFINITY,
         margin: f64::NEG_INFINITY,
         point: Vector3::new(0.0, 0.0, 0.0),
     };
@@ -331,8 +338,9 @@ impl SphereMeshGeometry {
             }
         };
         if first == seed {
+            let moved = (p - track.point).norm();
             let slack = ROUNDING * (1.0 + p.abs().max() + track.margin.abs());
-            let reach = track.margin - (p - track.point).norm() - slack;
+            let reach = track.margin - moved - slack;
             // The largest motion of all the other elements first: in the late solver iterations
             // it is small enough, and cheaper than the ball test. Without any motion the margin
             // would be `reach`: below the distance the ball test cannot help.
@@ -350,9 +358,13 @@ impl SphereMeshGeometry {
             } else {
                 reach
             };
-            if pr.distance < margin && !self.beats(track.runner, seed, p, pr.distance) {
+            let runner_margin = (pr.distance < margin)
+                .then(|| self.runner_margin(track, seed, p, moved, motions, pr.distance))
+                .flatten();
+            if let Some(runner_margin) = runner_margin {
                 *track = Track {
                     margin,
+                    runner_margin,
                     point: *p,
                     ..*track
                 };
@@ -364,7 +376,8 @@ impl SphereMeshGeometry {
         let (e, _) = search.nearest;
         *track = Track {
             element: e as u32,
-            runner: search.runner.map_or(NO_SEED, |r| r as u32),
+            runner: search.runner.map_or(NO_SEED, |(r, _)| r as u32),
+            runner_margin: search.runner.map_or(f64::NEG_INFINITY, |(_, d)| d),
             margin: search.margin,
             point: *p,
         };
@@ -377,15 +390,31 @@ impl SphereMeshGeometry {
         false
     }
 
-    /// Whether element `runner` (if in range) is nearer to `p` than element `seed` at `distance`,
-    /// or as near with a lower index (the argmin's tie rule).
+    /// Whether the point `p`, `moved` away from `track.point`, keeps element `seed` at
+    /// `distance` against the track's runner (if any; ties go to the lower index): the new lower
+    /// bound of the runner's distance if so. The old bound less the runner's motion and the
+    /// point's usually clears `distance`; otherwise the runner is evaluated.
     #[inline]
-    fn beats(&self, runner: u32, seed: usize, p: &Vector3<f64>, distance: f64) -> bool {
-        let runner = runner as usize;
-        self.frames.get(runner).is_some_and(|frame| {
-            let d = frame.distance_below(p, distance);
-            d < distance || (d == distance && runner < seed)
-        })
+    fn runner_margin(
+        &self,
+        track: &Track,
+        seed: usize,
+        p: &Vector3<f64>,
+        moved: f64,
+        motions: &Motions<'_>,
+        distance: f64,
+    ) -> Option<f64> {
+        let runner = track.runner as usize;
+        let Some(frame) = self.frames.get(runner) else {
+            return Some(f64::NEG_INFINITY);
+        };
+        let slack = ROUNDING * (1.0 + p.abs().max() + track.runner_margin.abs());
+        let bound = track.runner_margin - moved - motions.per_element[runner] - slack;
+        if distance < bound {
+            return Some(bound);
+        }
+        let d = frame.distance_below(p, distance);
+        (d > distance || (d == distance && runner > seed)).then_some(d)
     }
 
     /// The largest motion of the elements other than `skip` whose bounding balls may come
