@@ -153,6 +153,41 @@
 //! (≈ 180 frames/s in-process). Later alternations of the binaries before and after (3)
 //! ran while the machine slowed for identical code (`solve` 1.4 → 2.4 ms): `track` 6 130–8 470
 //! against 5 690–7 940 µs — inconclusive. The goal of 200 frames/s is **still not met**.
+//!
+//! Then (branch `speed12`), results bit for bit unchanged (the bench's digests of the last
+//! frame's pose and shape bits are equal before and after): the failed keep tests of the
+//! coherent closest points mostly (≈ 95 %) found the same element again in their full search,
+//! their margin spent by a second element within a hair of the first (points at the seam of
+//! two palm wedges or at a joint). (1) A search names that nearest other element within the
+//! gap, the *runner*, and the margin bounds the rest: the keep test evaluates the runner
+//! instead of searching (full searches ≈ 7 000 → 4 800 a frame); (2) the runner's distance is
+//! remembered as a lower bound worn down by its own motion, so it is evaluated again only when
+//! that no longer clears the winner; (3) a middle tier of the keep test, the largest motion of
+//! the element's neighbours (precomputed once per call), before the per-point ball test. Same
+//! shared machine, pinned to one core, the binaries before and after alternated ten times;
+//! per-frame minimum over the 60 timed frames, median over the runs (µs):
+//!
+//! | per-frame minimum (µs)          | before        | after         | after / before |
+//! |---------------------------------|---------------|---------------|----------------|
+//! | `track` (in-process, stages)    | 5 170         | 4 820         | 0.93           |
+//! | `correspondences`               | 3 530         | 3 170         | 0.90           |
+//! | `solve` (terms, factorization)  | 1 300         | 1 290         | 1.00           |
+//! | `reshape`, `laplace`, `filter`  | 49, 81, 75    | 49, 81, 76    | 1.00           |
+//! | `track`, plain sphere-mesh      | 5 220–5 360   | 4 760–4 910   | ≈ 0.92         |
+//!
+//! Criterion, two alternating runs: online frame 6.25 / 6.49 ms before against 5.74 / 5.40 ms
+//! after (≈ 0.87). ≈ 207 frames/s by the in-process per-frame minimum (4.82 ms), ≈ 175–185 by
+//! criterion's estimate, which includes the machine's noise: the goal of 200 frames/s is met
+//! only on the least disturbed frames. Tried and not kept: a Cholesky factorization bit for
+//! bit nalgebra's with contiguous columns and register blocking (slower than nalgebra's at
+//! 30–90 unknowns); two runners instead of one (no gain); `MARGIN_GAP` 3, 6 or one growing
+//! with the call's largest motion (no gain); a triangular-prism lower bound of the wedges in
+//! the search (their slab and the half-spaces beside their edges: it rules out ≈ 3 400 of the
+//! ≈ 9 000 wedge evaluations a frame that end beyond the gap, but measured ≈ 2 % slower, the
+//! larger element frames costing more than the edge pills it saved). What remains (`perf`):
+//! the coherent closest points ≈ 35 % of the frame (the kept points' seed projections, the
+//! ≈ 4 800 searches, the ball tests), the shape rows ≈ 16 %, the m2d render ≈ 12 %, the
+//! front-facing substitutes ≈ 6 %, the Cholesky factorizations ≈ 4 %.
 
 #[path = "../tests/common/mod.rs"]
 mod common;

@@ -23,10 +23,18 @@
 //! Points near the seam of two elements (adjacent palm wedges, a joint between phalanges) have
 //! a second element within a hair of the minimum, and any motion at all spent a margin set by
 //! it: most of the searches that followed found the same element again. So a search also names
-//! that nearest other element within the gap (the *runner* of `SphereMeshGeometry::search`); the margin
-//! bounds every element but the winner and the runner (the third smallest distance, capped),
-//! and the keep test evaluates the runner exactly (one element instead of a search). In the
-//! online bench this halved the failed keep tests (≈ 7 000 → 4 800 full searches a frame).
+//! that nearest other element within the gap (the *runner* of `SphereMeshGeometry::search`);
+//! the margin bounds every element but the winner and the runner (the third smallest distance,
+//! capped), and the keep test evaluates the runner exactly (one element instead of a search).
+//! In the online bench this cut the full searches by a third (≈ 7 000 → 4 800 a frame, 92 %
+//! of them still finding the same element). The runner's distance is remembered too, as a
+//! lower bound that its own motion and the point's wear down: it is evaluated again only
+//! when that bound no longer clears the winner.
+//!
+//! The keep test bounds the other elements' motion in three tiers, cheapest first: the largest
+//! motion of all of them; the largest motion of the element's neighbours (precomputed per
+//! element once per call, for points near their element: `Coherence::near_motions`); and the
+//! per-point ball test of the elements within reach (`SphereMeshGeometry::motion_within`).
 
 use super::geometry::SphereMeshGeometry;
 use super::union_silhouette::UnionSilhouette;
@@ -38,6 +46,13 @@ use nalgebra::Vector3;
 /// element evaluations per full search and saves more searches afterwards. Within one tracked
 /// frame the model moves a few millimetres in total over the solver iterations.
 pub(super) const MARGIN_GAP: f64 = 4.0;
+
+/// The neighbourhood of an element for the keep test's middle tier: a point at most
+/// `NEAR_DISTANCE` (mm) outside its element whose spent margin `reach` is at most `NEAR_REACH`
+/// can only have within reach the elements whose bounding balls come within
+/// `NEAR_DISTANCE + NEAR_REACH` of its element's ball (see [`Coherence::near_motions`]).
+const NEAR_DISTANCE: f64 = 4.0;
+const NEAR_REACH: f64 = 8.0;
 
 /// Relative rounding allowance of a margin per use: the margins, distances and motions compared
 /// are computed in floating point, each to ~1e-15 of the coordinates' magnitude.
@@ -62,6 +77,12 @@ pub struct Coherence {
     elements: Vec<Element>,
     /// Per element its motion `δ_e` since the last call (+∞ after a change of model).
     motions: Vec<f64>,
+    /// Per element, the largest motion of the other elements whose bounding balls come within
+    /// `NEAR_DISTANCE + NEAR_REACH` of its own (at the current spheres): a point near the
+    /// element (at most `NEAR_DISTANCE` outside it, so within that much of its ball) has no
+    /// other element within `NEAR_REACH` of it. A bound between the largest motion of all
+    /// other elements and the per-point ball test, looked up instead of tested.
+    near_motions: Vec<f64>,
     /// Per culling block of the geometry, the largest motion of its elements and the block,
     /// largest first (see [`SphereMeshGeometry::motion_within`]).
     block_motions: Vec<(f64, usize)>,
@@ -88,6 +109,10 @@ struct Track {
     /// The runner-up of the last search ([`NO_SEED`] for none): evaluated exactly by the keep
     /// test instead of being bounded by the margin.
     runner: u32,
+    /// A lower bound of the runner's `φ_e(point)` at the last call's spheres: the runner is
+    /// evaluated again only when this less its motion and the point's no longer clears the
+    /// winner.
+    runner_margin: f64,
     /// A lower bound of `φ_e(point)` over every element `e` but `element` and `runner` at the
     /// last call's spheres.
     margin: f64,
@@ -111,6 +136,7 @@ impl Track {
     const NONE: Self = Self {
         element: NO_SEED,
         runner: NO_SEED,
+        runner_margin: f64::NEG_INFINITY,
         margin: f64::NEG_INFINITY,
         point: Vector3::new(0.0, 0.0, 0.0),
     };
@@ -243,12 +269,31 @@ impl SphereMeshGeometry {
         assert_eq!(points.len(), out.len(), "one output slot per point");
         state.begin(&self.spheres, &self.elements, points.len());
         self.order_block_motions(&state.motions, &mut state.block_motions);
-        let motions = Motions::new(&state.motions, &state.block_motions);
+        self.near_motions(&state.motions, &mut state.near_motions);
+        let motions = Motions::new(&state.motions, &state.near_motions, &state.block_motions);
         let mut kept = 0;
         for ((p, o), track) in points.iter().zip(out.iter_mut()).zip(&mut state.tracks) {
             kept += usize::from(self.project_tracked(p, track, &motions, o));
         }
         state.kept = kept;
+    }
+
+    /// Fills `near` with each element's [`Coherence::near_motions`] entry given the elements'
+    /// `motions` (as many).
+    fn near_motions(&self, motions: &[f64], near: &mut Vec<f64>) {
+        near.clear();
+        near.resize(motions.len(), 0.0);
+        for (a, ball_a) in self.bounds.iter().enumerate() {
+            for (b, ball_b) in self.bounds.iter().enumerate().skip(a + 1) {
+                let reach = ball_a.radius + ball_b.radius + NEAR_DISTANCE + NEAR_REACH;
+                let scale = reach + ball_a.center.abs().max() + ball_b.center.abs().max();
+                let reach = reach + ROUNDING * scale;
+                if (ball_a.center - ball_b.center).norm_squared() <= reach * reach {
+                    near[a] = near[a].max(motions[b]);
+                    near[b] = near[b].max(motions[a]);
+                }
+            }
+        }
     }
 
     /// Fills `order` with the largest motion of each culling block's elements and the block,
@@ -293,8 +338,9 @@ impl SphereMeshGeometry {
             }
         };
         if first == seed {
+            let moved = (p - track.point).norm();
             let slack = ROUNDING * (1.0 + p.abs().max() + track.margin.abs());
-            let reach = track.margin - (p - track.point).norm() - slack;
+            let reach = track.margin - moved - slack;
             // The largest motion of all the other elements first: in the late solver iterations
             // it is small enough, and cheaper than the ball test. Without any motion the margin
             // would be `reach`: below the distance the ball test cannot help.
@@ -302,13 +348,23 @@ impl SphereMeshGeometry {
             let margin = if pr.distance < cheap {
                 cheap
             } else if pr.distance < reach {
-                reach - self.motion_within(p, reach, seed, motions, pr.distance)
+                // The element's neighbourhood next, when the point is near enough to it.
+                let near = reach - motions.near[seed];
+                if pr.distance < near && pr.distance <= NEAR_DISTANCE && reach <= NEAR_REACH {
+                    near
+                } else {
+                    reach - self.motion_within(p, reach, seed, motions, pr.distance)
+                }
             } else {
                 reach
             };
-            if pr.distance < margin && !self.beats(track.runner, seed, p, pr.distance) {
+            let runner_margin = (pr.distance < margin)
+                .then(|| self.runner_margin(track, seed, p, moved, motions, pr.distance))
+                .flatten();
+            if let Some(runner_margin) = runner_margin {
                 *track = Track {
                     margin,
+                    runner_margin,
                     point: *p,
                     ..*track
                 };
@@ -320,7 +376,8 @@ impl SphereMeshGeometry {
         let (e, _) = search.nearest;
         *track = Track {
             element: e as u32,
-            runner: search.runner.map_or(NO_SEED, |r| r as u32),
+            runner: search.runner.map_or(NO_SEED, |(r, _)| r as u32),
+            runner_margin: search.runner.map_or(f64::NEG_INFINITY, |(_, d)| d),
             margin: search.margin,
             point: *p,
         };
@@ -333,15 +390,31 @@ impl SphereMeshGeometry {
         false
     }
 
-    /// Whether element `runner` (if in range) is nearer to `p` than element `seed` at `distance`,
-    /// or as near with a lower index (the argmin's tie rule).
+    /// Whether the point `p`, `moved` away from `track.point`, keeps element `seed` at
+    /// `distance` against the track's runner (if any; ties go to the lower index): the new lower
+    /// bound of the runner's distance if so. The old bound less the runner's motion and the
+    /// point's usually clears `distance`; otherwise the runner is evaluated.
     #[inline]
-    fn beats(&self, runner: u32, seed: usize, p: &Vector3<f64>, distance: f64) -> bool {
-        let runner = runner as usize;
-        self.frames.get(runner).is_some_and(|frame| {
-            let d = frame.distance_below(p, distance);
-            d < distance || (d == distance && runner < seed)
-        })
+    fn runner_margin(
+        &self,
+        track: &Track,
+        seed: usize,
+        p: &Vector3<f64>,
+        moved: f64,
+        motions: &Motions<'_>,
+        distance: f64,
+    ) -> Option<f64> {
+        let runner = track.runner as usize;
+        let Some(frame) = self.frames.get(runner) else {
+            return Some(f64::NEG_INFINITY);
+        };
+        let slack = ROUNDING * (1.0 + p.abs().max() + track.runner_margin.abs());
+        let bound = track.runner_margin - moved - motions.per_element[runner] - slack;
+        if distance < bound {
+            return Some(bound);
+        }
+        let d = frame.distance_below(p, distance);
+        (d > distance || (d == distance && runner > seed)).then_some(d)
     }
 
     /// The largest motion of the elements other than `skip` whose bounding balls may come
@@ -391,6 +464,8 @@ impl SphereMeshGeometry {
 struct Motions<'a> {
     /// Per element its motion `δ_e`.
     per_element: &'a [f64],
+    /// Per element the largest motion of its neighbours ([`Coherence::near_motions`]).
+    near: &'a [f64],
     /// The element that moved most and its motion.
     largest: (usize, f64),
     /// The largest motion of the other elements.
@@ -400,7 +475,7 @@ struct Motions<'a> {
 }
 
 impl<'a> Motions<'a> {
-    fn new(per_element: &'a [f64], blocks: &'a [(f64, usize)]) -> Self {
+    fn new(per_element: &'a [f64], near: &'a [f64], blocks: &'a [(f64, usize)]) -> Self {
         let mut largest = (usize::MAX, 0.0);
         let mut second: f64 = 0.0;
         for (e, &m) in per_element.iter().enumerate() {
@@ -413,6 +488,7 @@ impl<'a> Motions<'a> {
         }
         Self {
             per_element,
+            near,
             largest,
             second,
             blocks,
@@ -446,13 +522,13 @@ mod tests {
 
     #[test]
     fn largest_motion_without_an_element() {
-        let m = Motions::new(&[1.0, 5.0, 3.0, 5.0], &[]);
+        let m = Motions::new(&[1.0, 5.0, 3.0, 5.0], &[], &[]);
         assert_eq!(m.largest_without(1), 5.0); // the tie at element 3
-        let m = Motions::new(&[1.0, 5.0, 3.0], &[]);
+        let m = Motions::new(&[1.0, 5.0, 3.0], &[], &[]);
         assert_eq!((m.largest_without(1), m.largest_without(0)), (3.0, 5.0));
-        let m = Motions::new(&[f64::INFINITY, f64::INFINITY], &[]);
+        let m = Motions::new(&[f64::INFINITY, f64::INFINITY], &[], &[]);
         assert_eq!(m.largest_without(0), f64::INFINITY);
-        let m = Motions::new(&[0.0, 0.0], &[]);
+        let m = Motions::new(&[0.0, 0.0], &[], &[]);
         assert_eq!((m.largest_without(0), m.largest_without(1)), (0.0, 0.0));
     }
 
@@ -474,6 +550,33 @@ mod tests {
                 .fold(0.0, |a: f64, &x| a.max(x));
             assert_eq!(m, expected);
         }
+    }
+
+    /// A pill of the chain (balls of radius 8 mm, 10 mm apart) has the pills within
+    /// 8 + 8 + 12 mm of its ball center as neighbours: two on each side.
+    #[test]
+    fn near_motions_are_the_largest_motions_of_the_neighbours() {
+        let (spheres, elements) = chain(20);
+        let g = SphereMeshGeometry::new(&spheres, &elements).unwrap();
+        let motions: Vec<f64> = (0..elements.len()).map(|e| e as f64).collect();
+        let mut near = Vec::new();
+        g.near_motions(&motions, &mut near);
+        assert_eq!(near[0], 2.0);
+        assert_eq!(near[10], 12.0);
+        assert_eq!(near[19], 18.0);
+        let mut motions = vec![0.0; elements.len()];
+        motions[15] = 3.0;
+        g.near_motions(&motions, &mut near);
+        let expected: Vec<f64> = (0..20)
+            .map(|e| {
+                if e != 15 && (13..=17).contains(&e) {
+                    3.0
+                } else {
+                    0.0
+                }
+            })
+            .collect();
+        assert_eq!(near, expected);
     }
 
     /// Points at the joints of a chain are as near to both pills there: the search names the

@@ -445,7 +445,7 @@ impl SphereMeshGeometry {
         // their time, never below the final `best + gap`: a second value within it is exact.
         let cap = best + gap;
         let (runner, margin) = if second.0 <= cap && second.1 < self.frames.len() {
-            (Some(second.1), third.min(cap))
+            (Some((second.1, second.0)), third.min(cap))
         } else {
             (None, second.0.min(cap))
         };
@@ -470,9 +470,9 @@ impl SphereMeshGeometry {
 pub(super) struct Search {
     /// The element minimising `φ_e(p)`, and that minimum.
     pub(super) nearest: (usize, f64),
-    /// The nearest element other than the minimum's when it is within the gap of the minimum
-    /// (its `φ_e(p)` was evaluated exactly).
-    pub(super) runner: Option<usize>,
+    /// The nearest element other than the minimum's and its `φ_e(p)` (evaluated exactly),
+    /// when it is within the gap of the minimum.
+    pub(super) runner: Option<(usize, f64)>,
     /// A lower bound of `φ_e(p)` over every element `e` other than the minimum's and the
     /// runner, at least the minimum (equal to it with a zero gap when another element ties).
     pub(super) margin: f64,
