@@ -80,6 +80,9 @@ impl<T: EnergyTerm<TrackingCtx<'static>>> EnergyTerm<OnlineCtx> for Lifted<T> {
     ) -> Result<TermStats, TermError> {
         self.0.accumulate(&ctx.tracking, ne)
     }
+    fn pose_only_prior(&self) -> bool {
+        self.0.pose_only_prior()
+    }
 }
 
 /// E_d2m + E_m2d (Eq. 4.2's data terms, Eq. 3.4–3.5) over pose *and* the active β: the rows of

@@ -33,6 +33,16 @@ pub struct LmOptions {
     /// Off, they describe the last linearization point (the pose before the last update) and
     /// one context refresh (re-pose, correspondences) is saved.
     pub final_evaluation: bool,
+    /// Solve the auxiliary unknowns' part of each non-rigid step against the gradient *without*
+    /// the pose-only priors ([`EnergyTerm::pose_only_prior`], e.g. the PCA pose prior), the
+    /// system matrix (their curvature included) and the pose's step unchanged. In a joint
+    /// pose + shape solve (honline's Eq. 4.2) a pose prior that holds the pose off the data's
+    /// optimum (a motion outside its corpus) leaves a residual that the shape absorbs, so the
+    /// shape's fixed point drifts from the data's; without the prior's pull in the shape's step
+    /// it drifts by the prior's share of the curvature only. One more pair of triangular
+    /// solves with the step's factor per non-rigid iteration; off by default (and inert without
+    /// pose-only priors or auxiliary unknowns).
+    pub decouple_aux: bool,
 }
 
 impl Default for LmOptions {
@@ -43,6 +53,7 @@ impl Default for LmOptions {
             damping: DampingParams::default(),
             step_tolerance: 0.0,
             final_evaluation: true,
+            decouple_aux: false,
         }
     }
 }
@@ -265,6 +276,8 @@ pub struct LmWorkspace {
     factor: DMatrix<f64>,
     diag: Vec<f64>,
     step: DVector<f64>,
+    /// [`LmOptions::decouple_aux`]: `b` without the pose-only priors, then its solution.
+    free_rhs: DVector<f64>,
     saved_pose: Vec<f64>,
     report: LmReport,
 }
@@ -277,6 +290,7 @@ impl LmWorkspace {
             factor: DMatrix::zeros(dim, dim),
             diag: vec![0.0; dim],
             step: DVector::zeros(dim),
+            free_rhs: DVector::zeros(dim),
             saved_pose: Vec::with_capacity(dim),
             report: LmReport::default(),
         }
@@ -447,7 +461,8 @@ impl LmSolver {
             callback
                 .prepare(pose, ctx, info)
                 .map_err(LmError::Callback)?;
-            let total = assemble(ws, ctx, terms)?;
+            let decouple = self.decouples(rigid, terms);
+            let total = assemble(ws, ctx, terms, decouple)?;
             updated_since_eval = false;
             if it == 0 {
                 ws.report.energy_before = total;
@@ -463,6 +478,9 @@ impl LmSolver {
             if !self.solve_step(ws, rigid) {
                 ws.report.termination = Termination::SolveFailed { iteration: it };
                 break;
+            }
+            if decouple {
+                self.decoupled_aux_step(ws);
             }
             // Apply δθ; never leave a non-finite pose behind.
             ws.saved_pose.clone_from(&pose.values);
@@ -495,7 +513,7 @@ impl LmSolver {
             callback
                 .prepare(pose, ctx, info)
                 .map_err(LmError::Callback)?;
-            ws.report.energy_after = assemble(ws, ctx, terms)?;
+            ws.report.energy_after = assemble(ws, ctx, terms, false)?;
             ws.report.final_evaluated = true;
             if !ws.ne.is_finite() {
                 ws.report.termination = Termination::NonFinite {
@@ -530,6 +548,27 @@ impl LmSolver {
 
     /// Build `A + diag(λ)` (rigid-masked), factor and solve into `ws.step`; extra damping on
     /// failure. Returns false (with a zero step) when no attempt succeeded.
+    /// Whether this iteration solves the auxiliary step apart ([`LmOptions::decouple_aux`]).
+    fn decouples<Ctx: ?Sized>(&self, rigid: bool, terms: &[&dyn EnergyTerm<Ctx>]) -> bool {
+        self.options.decouple_aux
+            && !rigid
+            && self.num_aux > 0
+            && terms.iter().any(|t| t.pose_only_prior())
+    }
+
+    /// After [`LmSolver::solve_step`] (whose factor `ws.factor` holds): the auxiliary part of
+    /// the step from `ws.free_rhs`; the step is kept as it is if that solution is not finite.
+    fn decoupled_aux_step(&self, ws: &mut LmWorkspace) {
+        let chol = Cholesky::pack_dirty(std::mem::replace(&mut ws.factor, DMatrix::zeros(0, 0)));
+        chol.solve_mut(&mut ws.free_rhs);
+        ws.factor = chol.unpack_dirty();
+        let n = self.num_dofs;
+        let aux = &ws.free_rhs.as_slice()[n..];
+        if aux.iter().all(|v| v.is_finite()) {
+            ws.step.as_mut_slice()[n..].copy_from_slice(aux);
+        }
+    }
+
     fn solve_step(&self, ws: &mut LmWorkspace, rigid: bool) -> bool {
         let n = self.dim();
         let mut scale = 0.0;
@@ -586,15 +625,17 @@ impl LmSolver {
 }
 
 /// Clear, accumulate every term, symmetrize; record per-term energies; return the total.
+/// `decouple`: the pose-only priors go last, and `b` before them is kept in `ws.free_rhs`.
 fn assemble<Ctx: ?Sized>(
     ws: &mut LmWorkspace,
     ctx: &Ctx,
     terms: &[&dyn EnergyTerm<Ctx>],
+    decouple: bool,
 ) -> Result<f64, LmError> {
     ws.ne.clear();
     ws.report.terms.clear();
     let mut total = 0.0;
-    for term in terms {
+    let mut add = |ws: &mut LmWorkspace, term: &dyn EnergyTerm<Ctx>| {
         let stats = term
             .accumulate(ctx, &mut ws.ne)
             .map_err(|source| LmError::Term {
@@ -607,6 +648,20 @@ fn assemble<Ctx: ?Sized>(
             energy: stats.energy,
             rows: stats.rows,
         });
+        Ok::<_, LmError>(())
+    };
+    if decouple {
+        for term in terms.iter().filter(|t| !t.pose_only_prior()) {
+            add(ws, *term)?;
+        }
+        ws.free_rhs.copy_from(ws.ne.rhs());
+        for term in terms.iter().filter(|t| t.pose_only_prior()) {
+            add(ws, *term)?;
+        }
+    } else {
+        for term in terms {
+            add(ws, *term)?;
+        }
     }
     ws.ne.symmetrize();
     Ok(total)

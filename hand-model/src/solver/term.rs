@@ -53,6 +53,13 @@ pub trait EnergyTerm<Ctx: ?Sized> {
 
     /// Add this term's linearization to `ne`.
     fn accumulate(&self, ctx: &Ctx, ne: &mut NormalEquations) -> Result<TermStats, TermError>;
+
+    /// Whether this term is a prior on the pose DOFs alone (the PCA pose prior): under
+    /// [`super::LmOptions::decouple_aux`] its pull moves the pose but not the auxiliary
+    /// unknowns.
+    fn pose_only_prior(&self) -> bool {
+        false
+    }
 }
 
 /// What the reusable prior terms of [`super::terms`] need from a context: the skeleton, the

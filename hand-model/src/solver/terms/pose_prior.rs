@@ -271,6 +271,11 @@ impl<C: PoseContext + ?Sized> EnergyTerm<C> for PosePrior {
         "pose_prior"
     }
 
+    /// The augmented form reaches its latents (auxiliary unknowns), so it is not pose-only.
+    fn pose_only_prior(&self) -> bool {
+        self.form != PosePriorForm::Augmented
+    }
+
     fn accumulate(&self, ctx: &C, ne: &mut NormalEquations) -> Result<TermStats, TermError> {
         let theta = &ctx.pose().values;
         let mut stats = TermStats::ZERO;
