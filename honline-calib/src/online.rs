@@ -64,7 +64,7 @@ pub struct OnlineConfig {
     pub min_points: usize,
     /// Express ω_shape-space (both weights) per unit of the data's noise: times
     /// `max(σ̂ / 1 mm, 1)²`, σ̂ the depth noise measured on the hand every
-    /// [`NOISE_INTERVAL`] frames (`sensor_io::preprocess::depth_noise`, smoothed). The data
+    /// `NOISE_INTERVAL` (15) frames (`sensor_io::preprocess::depth_noise`, smoothed). The data
     /// terms are sums of squared millimetres, so noisy frames outvote the prior by σ̂² and the
     /// estimate follows the noise; noise-free data (σ̂ < 1 mm) keep ω as given. Measured
     /// (`eval/tests/ch4_acceptance.rs` tracking scenario, ToF, σ̂ ≈ 5 mm, subjects 7 / 8 / 9):
