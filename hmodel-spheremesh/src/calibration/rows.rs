@@ -152,47 +152,50 @@ impl Moment {
     };
 
     /// Add the row `z′ = (wₗ z)ₗ` (`wl[..m]`, `z = [g; g·n]`) with residual `r` and weight `ω`:
-    /// multiples of one `ω zzᵀ` on fixed-size blocks, 16 multiply-adds per sphere pair that the
-    /// row weights (at most 6), with no `z′` formed.
+    /// multiples of one `ω zzᵀ` on fixed-size blocks, 16 multiply-adds per sphere pair (at
+    /// most 6), with no `z′` formed.
     #[inline]
     fn add(&mut self, wl: &[f64; MAX_SPHERES], m: usize, z: &[f64; 4], r: f64, w: f64) {
+        match m {
+            0 => {}
+            1 => self.add_spheres::<1>(wl, z, r, w),
+            2 => self.add_spheres::<2>(wl, z, r, w),
+            _ => self.add_spheres::<MAX_SPHERES>(wl, z, r, w),
+        }
+        self.used = true;
+    }
+
+    /// [`Moment::add`] for an element of `M` spheres, unrolled. The pairs a footpoint does
+    /// not weigh (a cap or an edge of a wedge: `wₗ = 0`) are added too, as ±0 that leaves
+    /// every sum bit for bit unchanged (a sum that starts at +0 is never −0), rather than
+    /// skipped behind a branch that the footpoints' mix of faces, edges and caps mispredicts.
+    #[inline(always)]
+    fn add_spheres<const M: usize>(
+        &mut self,
+        wl: &[f64; MAX_SPHERES],
+        z: &[f64; 4],
+        r: f64,
+        w: f64,
+    ) {
         let mut zz = [[0.0; 4]; 4];
         for (row, &za) in zz.iter_mut().zip(z) {
             for (x, &zb) in row.iter_mut().zip(z) {
                 *x = w * za * zb;
             }
         }
-        let m = m.min(MAX_SPHERES);
-        for l in 0..m {
-            if wl[l] == 0.0 {
-                continue;
-            }
+        for l in 0..M {
             let wr = w * r * wl[l];
             for (v, &zc) in self.v[4 * l..4 * l + 4].iter_mut().zip(z) {
                 *v += wr * zc;
             }
-            for l2 in l..m {
+            for l2 in l..M {
                 let c = wl[l] * wl[l2];
-                if c == 0.0 {
-                    continue;
-                }
                 for (row, zzr) in self.m[4 * l..4 * l + 4].iter_mut().zip(&zz) {
                     for (x, &y) in row[4 * l2..4 * l2 + 4].iter_mut().zip(zzr) {
                         *x += c * y;
                     }
                 }
             }
-        }
-        self.used = true;
-    }
-
-    /// Entry `(a, b)` of the symmetric `Σ ω z′z′ᵀ` from the kept blocks.
-    #[inline]
-    fn entry(&self, a: usize, b: usize) -> f64 {
-        if a / 4 <= b / 4 {
-            self.m[a][b]
-        } else {
-            self.m[b][a]
         }
     }
 }
@@ -213,6 +216,10 @@ struct ElementMaps {
     /// `E_e` row-major (`4m` rows of `K` values) at `e_start[e]`.
     e: Vec<f64>,
     e_start: Vec<usize>,
+    /// Per element and row of `E_e`, the columns `[lo, hi)` outside which the row is zero
+    /// (a radius row holds the one or two radius columns of its sphere): the products with
+    /// those zeros would only add ±0.
+    spans: Vec<[[usize; 2]; Z]>,
     /// Per system unknown, its slot in the element being mapped (`u32::MAX`: none yet).
     slot_of: Vec<u32>,
     /// Flush scratch: `M E_e`, the packed `K × K` block and its right-hand side.
@@ -252,6 +259,7 @@ impl ElementMaps {
         self.col_start.clear();
         self.e.clear();
         self.e_start.clear();
+        self.spans.clear();
         self.slot_of.clear();
         self.slot_of.resize(dim, u32::MAX);
         let mut g = [Vector3::zeros(); MAX_ELEMENT_DOFS];
@@ -274,6 +282,7 @@ impl ElementMaps {
                 }
             }
             let k = self.cols.len() - start;
+            let mut spans = [[0, 0]; Z];
             if ok {
                 let e0 = self.e.len();
                 self.e.resize(e0 + 4 * ids.len() * k, 0.0);
@@ -288,6 +297,9 @@ impl ElementMaps {
                             rows[c * k + j] = col[c];
                         }
                     }
+                    // The center rows span the pose columns and the sphere's center columns,
+                    // the radius row its radius columns (empty: `[k, 0)`).
+                    let (mut center, mut radius) = ([0, n], [k, 0]);
                     let s = s as usize;
                     for &(i, dc, dr) in &columns[starts[s]..starts[s + 1]] {
                         let slot = self.slot_of[i] as usize;
@@ -295,7 +307,15 @@ impl ElementMaps {
                             rows[c * k + slot] += dc[c];
                         }
                         rows[3 * k + slot] += dr;
+                        if dc != Vector3::zeros() {
+                            center[1] = center[1].max(slot + 1);
+                        }
+                        if dr != 0.0 {
+                            radius = [radius[0].min(slot), radius[1].max(slot + 1)];
+                        }
                     }
+                    spans[4 * l..4 * l + 3].fill(center);
+                    spans[4 * l + 3] = [radius[0].min(radius[1]), radius[1]];
                 }
                 let mut spheres = [0; MAX_SPHERES];
                 spheres[..ids.len()].copy_from_slice(ids);
@@ -303,6 +323,7 @@ impl ElementMaps {
             } else {
                 self.spheres.push(None);
             }
+            self.spans.push(spans);
             for &i in &self.cols[start..] {
                 self.slot_of[i] = u32::MAX;
             }
@@ -357,30 +378,39 @@ impl ElementMaps {
             let cols = &self.cols[self.col_start[el]..self.col_start[el + 1]];
             let k = cols.len();
             let e = &self.e[self.e_start[el]..self.e_start[el] + d * k];
-            // M E.
+            let spans = &self.spans[el][..d];
+            // M E, row `a` from the kept blocks: `M[b][a]` left of `a`'s diagonal block, `M[a][b]`
+            // from it on; each product only over the span of `E_e`'s row `b`. Zeros inside a
+            // span (and zero entries of `M`) are multiplied out rather than tested: they add ±0,
+            // which leaves the sums bit for bit unchanged, and the tests mispredicted.
             self.me.clear();
             self.me.resize(d * k, 0.0);
-            for a in 0..d {
-                for b in 0..d {
-                    let x = mom.entry(a, b);
-                    if x != 0.0 {
-                        add_scaled(&mut self.me[a * k..(a + 1) * k], x, &e[b * k..(b + 1) * k]);
-                    }
+            for (a, me) in self.me.chunks_exact_mut(k).enumerate() {
+                let diagonal = a / 4 * 4;
+                let mut add = |b: usize, x: f64| {
+                    let [lo, hi] = spans[b];
+                    add_scaled(&mut me[lo..hi], x, &e[b * k + lo..b * k + hi]);
+                };
+                for b in 0..diagonal {
+                    add(b, mom.m[b][a]);
+                }
+                for b in diagonal..d {
+                    add(b, mom.m[a][b]);
                 }
             }
-            // Eᵀ (M E), upper triangle packed row by row, and b = −Eᵀ v.
+            // Eᵀ (M E), upper triangle packed row by row, and b = −Eᵀ v, over the spans.
             self.upper.clear();
             self.upper.resize(k * (k + 1) / 2, 0.0);
             self.rhs.clear();
             self.rhs.resize(k, 0.0);
-            for (i, &vi) in mom.v[..d].iter().enumerate() {
+            for (i, (&vi, &[lo, hi])) in mom.v[..d].iter().zip(spans).enumerate() {
                 let (er, mr) = (&e[i * k..(i + 1) * k], &self.me[i * k..(i + 1) * k]);
-                let mut off = 0;
-                for (p, &x) in er.iter().enumerate() {
-                    if x != 0.0 {
-                        add_scaled(&mut self.upper[off..off + k - p], x, &mr[p..]);
-                        self.rhs[p] -= x * vi;
-                    }
+                // Row `lo` of the packed triangle.
+                let mut off = lo * k - lo * lo.saturating_sub(1) / 2;
+                for p in lo..hi {
+                    let x = er[p];
+                    add_scaled(&mut self.upper[off..off + k - p], x, &mr[p..]);
+                    self.rhs[p] -= x * vi;
                     off += k - p;
                 }
             }
