@@ -39,10 +39,17 @@ pub(crate) enum Footprint {
 }
 
 /// The quadrilateral between the outer tangents of two discs (its corners are the tangent
-/// points, in order around it), computed once per element instead of once per pixel row
-/// ([`Footprint::span`] runs for every row).
+/// points, in order around it), framed once per element instead of once per pixel row
+/// ([`Footprint::span`] runs for every row): per edge, from corner `i` to the next, its start,
+/// its slope `dx/dy` (0 along a row) and its extent in `y`.
 #[derive(Copy, Clone, Debug, PartialEq)]
-pub(crate) struct Quad([Vector2<f64>; 4]);
+pub(crate) struct Quad {
+    x: [f64; 4],
+    y: [f64; 4],
+    slope: [f64; 4],
+    y_min: [f64; 4],
+    y_max: [f64; 4],
+}
 
 /// Radius (in normalized image units) of a disc around `π(c)` holding the image of the sphere,
 /// or `None` when the sphere is not safely in front of the camera.
@@ -141,12 +148,10 @@ impl Footprint {
             Self::Everywhere => (0.0, last),
             Self::Discs(c, r, n, quads) => {
                 let y = f64::from(v);
-                let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
-                let mut add = |iv: Option<(f64, f64)>| {
-                    if let Some((a, b)) = iv {
-                        lo = lo.min(a);
-                        hi = hi.max(b);
-                    }
+                let (mut lo, mut hi) = (FAR, -FAR);
+                let mut add = |(a, b): (f64, f64)| {
+                    lo = lo.min(a);
+                    hi = hi.max(b);
                 };
                 for (center, r) in c[..*n].iter().zip(r) {
                     add(disc_row(center, *r, y));
@@ -161,14 +166,25 @@ impl Footprint {
     }
 }
 
-/// `{u : ‖(u, y) − c‖ ≤ r}`.
-fn disc_row(c: &Vector2<f64>, r: f64, y: f64) -> Option<(f64, f64)> {
+/// `{u : ‖(u, y) − c‖ ≤ r}`, or `(FAR, −FAR)` when empty.
+#[inline]
+fn disc_row(c: &Vector2<f64>, r: f64, y: f64) -> (f64, f64) {
     let dy = y - c.y;
     let h = r * r - dy * dy;
-    (h >= 0.0).then(|| {
-        let w = h.sqrt();
-        (c.x - w, c.x + w)
-    })
+    let w = h.max(0.0).sqrt();
+    let far = far_unless(h >= 0.0);
+    (c.x - w + far, c.x + w - far)
+}
+
+/// Beyond any column: what a piece that a row misses adds to the ends of its span, so that the
+/// row's pieces are merged without branching (which pieces a row crosses changes from row to
+/// row, and branches on it mispredicted; `x + 0` is `x`, so the crossed pieces are exact).
+const FAR: f64 = 1e300;
+
+/// 0 when `crosses`, else [`FAR`] (by arithmetic: a `bool` select compiled to a branch).
+#[inline]
+fn far_unless(crosses: bool) -> f64 {
+    f64::from(u8::from(!crosses)) * FAR
 }
 
 /// The pairs of discs joined by tangent quadrilaterals (the first one only for two discs).
@@ -189,32 +205,41 @@ impl Quad {
         let sine = (ra - rb) / len;
         let cosine = (1.0 - sine * sine).sqrt();
         let (plus, minus) = (t * sine + perp * cosine, t * sine - perp * cosine);
-        Some(Self([
-            a + plus * ra,
-            b + plus * rb,
-            b + minus * rb,
-            a + minus * ra,
-        ]))
+        let corners = [a + plus * ra, b + plus * rb, b + minus * rb, a + minus * ra];
+        let mut quad = Self {
+            x: [0.0; 4],
+            y: [0.0; 4],
+            slope: [0.0; 4],
+            y_min: [0.0; 4],
+            y_max: [0.0; 4],
+        };
+        for (i, p) in corners.iter().enumerate() {
+            let q = &corners[(i + 1) % 4];
+            let dy = q.y - p.y;
+            quad.x[i] = p.x;
+            quad.y[i] = p.y;
+            // An edge along the row reports its start only: its end starts the next edge.
+            quad.slope[i] = if dy == 0.0 { 0.0 } else { (q.x - p.x) / dy };
+            quad.y_min[i] = p.y.min(q.y);
+            quad.y_max[i] = p.y.max(q.y);
+        }
+        Some(quad)
     }
 
-    /// `{u : (u, y) in the quadrilateral}`: where row `y` crosses its edges.
-    fn row(&self, y: f64) -> Option<(f64, f64)> {
-        let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
-        for (i, p) in self.0.iter().enumerate() {
-            let q = &self.0[(i + 1) % 4];
-            if (p.y - y) * (q.y - y) > 0.0 {
-                continue; // the edge is entirely above or below the row
-            }
-            let (x0, x1) = if p.y == q.y {
-                (p.x, q.x) // an edge along the row
-            } else {
-                let x = p.x + (y - p.y) * (q.x - p.x) / (q.y - p.y);
-                (x, x)
-            };
-            lo = lo.min(x0.min(x1));
-            hi = hi.max(x0.max(x1));
+    /// `{u : (u, y) in the quadrilateral}`: where row `y` crosses its edges, `(FAR, −FAR)` when
+    /// nowhere. The crossings come from the slopes rather than a division per edge and row: they
+    /// may differ from the exact ones by a rounding, which the footprint's slack covers (the
+    /// element's image stays more than [`SLACK_PX`] inside), so no ray that hits is dropped.
+    #[inline]
+    fn row(&self, y: f64) -> (f64, f64) {
+        let (mut lo, mut hi) = (FAR, -FAR);
+        for i in 0..4 {
+            let x = self.x[i] + (y - self.y[i]) * self.slope[i];
+            let far = far_unless((self.y_min[i] <= y) & (y <= self.y_max[i]));
+            lo = lo.min(x + far);
+            hi = hi.max(x - far);
         }
-        (lo <= hi).then_some((lo, hi))
+        (lo, hi)
     }
 }
 
