@@ -188,6 +188,45 @@
 //! the coherent closest points ≈ 35 % of the frame (the kept points' seed projections, the
 //! ≈ 4 800 searches, the ball tests), the shape rows ≈ 16 %, the m2d render ≈ 12 %, the
 //! front-facing substitutes ≈ 6 %, the Cholesky factorizations ≈ 4 %.
+//!
+//! Then (branch `speed13`), results bit for bit unchanged (digests equal before and after): the
+//! branches that mispredicted, found with `valgrind --tool=callgrind --branch-sim=yes` (its
+//! instruction and misprediction counts do not depend on the machine's load, where the
+//! wall-clock timings varied by ±15 % while another job compiled on both cores). (1) The shape
+//! rows' element moments add every sphere pair, a pair that the footpoint does not weigh as ±0
+//! (which leaves a sum that starts at +0 unchanged) instead of branching on the weights, and
+//! the per-element products `M E_e` and `E_eᵀ (M E_e)` run over each row of `E_e`'s nonzero
+//! span without testing entries (a radius row holds one column); (2) the m2d footprints merge
+//! a row's pieces branch-free (a missed disc or quadrilateral adds ±`FAR`) and cross the
+//! quadrilaterals' edges by slopes framed once per element instead of a division per edge and
+//! row (within a rounding of the exact crossing, which the footprint's 0.5 px slack covers: the
+//! same rays hit). Simulated over the 90 frames of `--bench nomatch`: instructions 5 028 M →
+//! 4 923 M (−2 %), mispredicted branches 25.7 M → 24.3 M (−5 %; `Footprint::span` 1.04 M →
+//! 0.22 M, the data rows' assembly 6.9 M → 6.4 M). Same shared machine, pinned to one core, the
+//! binaries before and after alternated 15 times; per-frame minimum over the 60 timed frames,
+//! median over the runs, and the least of them (µs):
+//!
+//! | per-frame minimum (µs)          | before        | after         | after / before |
+//! |---------------------------------|---------------|---------------|----------------|
+//! | `track` (in-process, stages)    | 4 743 (4 706) | 4 647 (4 585) | 0.98 (0.97)    |
+//! | `correspondences`               | 3 146 (3 122) | 3 092 (3 041) | 0.98 (0.97)    |
+//! | `solve` (terms, factorization)  | 1 282 (1 269) | 1 233 (1 223) | 0.96 (0.96)    |
+//! | `reshape`, `laplace`, `filter`  | 47, 80, 75    | 47, 79, 75    | 1.00           |
+//! | `track`, plain sphere-mesh      | 4 857 (4 793) | 4 768 (4 729) | 0.98 (0.99)    |
+//!
+//! The medians over the frames of a run (4 941 before, 4 956 after in the quietest runs) and
+//! criterion's estimates of the online frame (5.6 / 5.7 / 6.0 / 6.1 / 6.3 / 6.5 ms before,
+//! 5.6 / 5.9 / 6.3 / 6.4 / 6.8 / 6.8 ms after, six alternating runs while the other job compiled)
+//! moved by less than the machine's noise: ≈ 215 frames/s by the per-frame minimum, ≈ 200 by the
+//! median frame of a quiet run — the goal of 200 frames/s **still not met reliably** on this
+//! machine. Tried and not kept (no measurable change): the products of the flush reordered so that
+//! the loop lengths repeat (`M E_e` column by column, `E_eᵀ (M E_e)` row by row: ≈ −0.4 %
+//! instructions, mispredictions unchanged in the simulation); the wedge's inside test with one
+//! branch instead of three and the plane side's sign by arithmetic (−4 % simulated mispredictions,
+//! +0.2 % instructions, per-frame minima within ±1 %). What remains (`perf`): the coherent closest
+//! points ≈ 38 % of the frame, the shape rows ≈ 13 %, the m2d render ≈ 12 % (`Footprint::span`
+//! 3.7 → 2.8 %), the front-facing substitutes ≈ 5 %, the Cholesky factorizations ≈ 4 %, the
+//! re-posing and residuals (`TrackingCtx::update`) ≈ 2.4 %.
 
 #[path = "../tests/common/mod.rs"]
 mod common;
