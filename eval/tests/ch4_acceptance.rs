@@ -29,7 +29,9 @@
 //! 5.9 mm middle phalanx, which the estimate swapped; 14/15 draws converging at σ = 0.3, mean
 //! E_β 0.93 mm).
 //!
-//! Status (IEKF, 15 draws per σ, 20 s, noise-free; `full_size`'s IEKF part, run by hand): mean
+//! Status before the noise-scaled decoupling of β's step from the pose prior (session 11; the
+//! CI draw 0 went 0.67 → 0.50 mm with it, `honline_calib`'s docs) — IEKF, 15 draws per σ, 20 s,
+//! noise-free, `full_size`'s IEKF part, run by hand: mean
 //! E_β 0.508 / 0.508 / 0.509 / 0.560 mm at σ = 0.1 / 0.2 / 0.3 / 0.4, max 0.685 / 0.688 /
 //! 0.686 / 1.275 mm, every draw converging (15/15 at every σ). The end is the same per user
 //! whatever σ (seed 0: 0.484 / 0.480 / 0.487 / 0.481 mm): started at the user's own shape
@@ -441,24 +443,34 @@ fn tracking_with_online_calibration_tof() {
     check_tracking("tof");
 }
 
-/// The pose prior kept out of the shape's step (`LmOptions::decouple_aux`) and every β entry
-/// estimated (`ShapeSubset::All`: the palm centers of a random subject are not in the null
-/// space — the subject's palm spheres leave the palm's hull): on noise-free data the estimate
-/// lands nearer the subject's shape and the tracking nearer the true template's than the
-/// default's (measured in `honline_calib`'s docs, with what it costs under ToF noise).
+/// The PCA pose prior's pull kept out of β's step where the data are exact
+/// (`LmOptions::decouple_aux`, on by default in `honline_schedule`, the share of the pull kept
+/// following the measured depth noise): against the joint step, noise-free, the estimate lands
+/// nearer the subject's shape and the tracking nearer the true template's; under ToF noise
+/// (σ̂ ≈ 5 mm, 96 % of the pull kept) the tracking stays where the joint step leaves it. With
+/// every β entry estimated (`ShapeSubset::All`: a random subject's palm spheres leave the
+/// palm's hull, so the palm centers are not in the null space) the noise-free estimate comes
+/// nearer still (measurements in `honline_calib`'s docs).
 #[test]
-fn tracking_with_the_pose_prior_kept_out_of_the_shape() {
-    let mut decoupled = config(Estimator::Iekf);
-    decoupled.tracker.lm.decouple_aux = true;
-    decoupled.subset = honline_calib::ShapeSubset::All;
-    let (a0, b0, _, e0) = tracking("none", 300, 7);
-    let (a1, b1, _, e1) = tracking_with("none", 300, 7, decoupled);
+fn the_pose_prior_is_kept_out_of_the_shape_on_exact_data() {
+    let mut joint = config(Estimator::Iekf);
+    joint.tracker.lm.decouple_aux = false;
+    let (a0, b0, _, e0) = tracking_with("none", 300, 7, joint.clone());
+    let (a1, b1, _, e1) = tracking("none", 300, 7);
     assert_eq!(b0, b1, "the same reference run");
-    assert!(e1 < 0.5 * e0, "E_β: default {e0} mm, decoupled {e1} mm");
+    assert!(e1 < 0.6 * e0, "E_β: joint {e0} mm, default {e1} mm");
+    assert!(a1 < 0.8 * a0, "keypoints: joint {a0} mm, default {a1} mm");
+    let (c0, _, _, _) = tracking_with("tof", 300, 7, joint);
+    let (c1, _, _, _) = tracking("tof", 300, 7);
     assert!(
-        a1 < 0.8 * a0,
-        "keypoints: default {a0} mm, decoupled {a1} mm"
+        (c1 - c0).abs() < 0.03 * c0,
+        "ToF keypoints: joint {c0} mm, default {c1} mm"
     );
+    let mut all = config(Estimator::Iekf);
+    all.subset = honline_calib::ShapeSubset::All;
+    let (a2, _, _, e2) = tracking_with("none", 300, 7, all);
+    assert!(e2 < 0.5 * e1, "E_β: default {e1} mm, All {e2} mm");
+    assert!(a2 < 0.9 * a1, "keypoints: default {a1} mm, All {a2} mm");
 }
 
 /// Fig. 4.7 under the ToF sensor model (one draw per σ, 10 s): what noise does to the

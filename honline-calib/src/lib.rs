@@ -50,20 +50,31 @@
 //!   template, so a subject with another palm size is fitted by the palm radii instead; under
 //!   the ToF noise model the radii come out ≈ 0.8 mm thin on average, and the certainty (in the
 //!   units of the IRLS-weighted data term, honline's too) is far above what the error supports.
-//! - Option against the pose prior's bias: `tracker.lm.decouple_aux`
-//!   ([`hand_model::solver::LmOptions::decouple_aux`]) solves β's part of each step against
-//!   the gradient without the pose prior's pull (its curvature kept), so β stops absorbing the
-//!   pull; with [`ShapeSubset::All`] the palm centers are estimated too (a random subject's
-//!   palm spheres leave the palm's hull, so they are not in the null space). Measured, 300
-//!   frames, last-third keypoint error over the true template's (default → decoupled + All):
-//!   noise-free subjects 7 / 8 / 9 **2.78 / 2.45 / 2.57 → 1.62 / 1.55 / 1.16**, E_β at the end
-//!   0.689 / 0.662 / 0.422 → 0.129 / 0.132 / 0.109 mm; Fig. 4.7 draws 0–3 (noise-free, 10 s,
-//!   decoupled alone) mean E_β 0.576 → 0.377 mm at σ = 0.2, 0.579 → 0.374 at σ = 0.4. Under
-//!   the ToF noise model it loses: subjects 7 / 8 ratio 1.31 / 1.28 → 1.50 / 1.38, Fig. 4.7
-//!   draw 0 keypoints 5.97 → 7.84 mm (E_β 1.81 → 1.90) — there the prior's pull is
-//!   regularization, not bias. Off by default for that reason. (The full system solved without
-//!   the prior for β's part gave the same noise-free gains at the cost of a second
-//!   factorization.)
+//! - Against the pose prior's bias, by default with the joint estimator:
+//!   `tracker.lm.decouple_aux` ([`hand_model::solver::LmOptions::decouple_aux`]) solves β's
+//!   part of each step against the gradient without the pose prior's pull (its curvature
+//!   kept), so β stops absorbing the pull — on exact data. On noisy data that pull is
+//!   regularization, so the share of it kept in β's step follows the measured depth noise:
+//!   `1 − 1/max(σ̂ / 1 mm, 1)²` ([`OnlineConfig::noise_scaled_prior`], the same scale as the
+//!   shape-space prior's), 0 noise-free, ≈ 0.96 at the ToF model's σ̂ ≈ 5 mm. Measured, 300
+//!   frames, last-third keypoint error over the true template's (joint step → noise-scaled
+//!   decoupling): noise-free subjects 7 / 8 / 9 **2.78 / 2.45 / 2.57 → 1.95 / 1.83 / 1.76**, E_β
+//!   at the end 0.689 / 0.662 / 0.422 → 0.369 / 0.370 / 0.164 mm; ToF 1.31 / 1.28 / 1.31 →
+//!   1.31 / 1.29 / 1.32 (E_β 0.730 / 0.978 / 0.921 → 0.724 / 0.981 / 0.924 mm); Fig. 4.7 CI
+//!   draw 0 (noise-free, 10 s) E_β 0.665 / 0.671 / 0.671 / 0.674 → 0.493 / 0.504 / 0.495 / 0.494
+//!   mm at σ = 0.1 / 0.2 / 0.3 / 0.4. Fully decoupled also under ToF it lost (subjects 7 / 8
+//!   1.31 / 1.28 → 1.50 / 1.38, Fig. 4.7 draw 0 keypoints 5.97 → 7.84 mm). The split and
+//!   per-frame estimators keep the joint step: without E_iekf a frame's β and pose trade off
+//!   freely and the prior's pull is what holds that direction (decoupled, draw 0 σ = 0.2: split
+//!   E_β 0.37 → 0.62 mm, per-frame 1.33 → 2.52). (The full system solved without the prior for
+//!   β's part gave the same noise-free gains at the cost of a second factorization.)
+//! - Palm centers: with [`ShapeSubset::WithPalm`] they are estimated too (a random subject's
+//!   palm spheres leave the palm's hull, so they are not in the null space), with
+//!   [`ShapeSubset::All`] also the wrist and membrane entries. Noise-free subjects 7 / 8 / 9
+//!   (with the decoupling above): `WithPalm` 1.85 / 1.92 / 1.38 (E_β 0.163 / 0.182 / 0.144
+//!   mm), `All` 1.62 / 1.55 / 1.16 (0.129 / 0.132 / 0.109 mm, but the unobserved
+//!   `wrist_length` drifts 4.3 mm); ToF `WithPalm` 1.32 / 1.28 / 1.29, `All` 1.36 / 1.25 /
+//!   1.33. Not the default: mixed on the keypoints, 10–15 more state entries per frame.
 //! - Not yet here: loss detection and re-initialization (the first pose comes from
 //!   [`OnlineCalibrator::set_pose`] or the PCA mean placed on the points).
 //! - The collision term (Ch. 3) tolerates the overlap the model's pills have at the rest pose;

@@ -43,6 +43,14 @@ pub struct LmOptions {
     /// solves with the step's factor per non-rigid iteration; off by default (and inert without
     /// pose-only priors or auxiliary unknowns).
     pub decouple_aux: bool,
+    /// With [`LmOptions::decouple_aux`]: the share (0..=1) of the pose-only priors' pull kept
+    /// in the auxiliary step — the step is `s·δ_joint + (1 − s)·δ_free` over the auxiliary
+    /// unknowns, both solved with the same factor (the two solutions are linear in the
+    /// right-hand side, so this is the solution with the prior's gradient scaled by `s`).
+    /// 0: fully decoupled; 1: the joint step (no decoupling at all, bit for bit). A caller
+    /// that knows the data's noise can move it per frame ([`LmSolver::set_aux_prior_share`]):
+    /// with noisy data the prior's pull is regularization rather than bias.
+    pub aux_prior_share: f64,
 }
 
 impl Default for LmOptions {
@@ -54,6 +62,7 @@ impl Default for LmOptions {
             step_tolerance: 0.0,
             final_evaluation: true,
             decouple_aux: false,
+            aux_prior_share: 0.0,
         }
     }
 }
@@ -81,6 +90,9 @@ pub enum OptionsError {
     /// `step_tolerance` is negative or not finite.
     #[error("`step_tolerance` must be finite and non-negative")]
     StepTolerance,
+    /// `aux_prior_share` is outside 0..=1 (or not finite).
+    #[error("`aux_prior_share` must lie in 0..=1")]
+    AuxPriorShare,
 }
 
 impl LmOptions {
@@ -98,6 +110,9 @@ impl LmOptions {
         self.damping.validate()?;
         if !(self.step_tolerance.is_finite() && self.step_tolerance >= 0.0) {
             return Err(OptionsError::StepTolerance);
+        }
+        if !(0.0..=1.0).contains(&self.aux_prior_share) {
+            return Err(OptionsError::AuxPriorShare);
         }
         Ok(())
     }
@@ -390,6 +405,16 @@ impl LmSolver {
         &self.options
     }
 
+    /// Set [`LmOptions::aux_prior_share`] for the next solves (clamped to 0..=1; a non-finite
+    /// share keeps the joint step, 1).
+    pub fn set_aux_prior_share(&mut self, share: f64) {
+        self.options.aux_prior_share = if share.is_finite() {
+            share.clamp(0.0, 1.0)
+        } else {
+            1.0
+        };
+    }
+
     /// Number of pose DOFs.
     pub fn num_dofs(&self) -> usize {
         self.num_dofs
@@ -551,13 +576,15 @@ impl LmSolver {
     /// Whether this iteration solves the auxiliary step apart ([`LmOptions::decouple_aux`]).
     fn decouples<Ctx: ?Sized>(&self, rigid: bool, terms: &[&dyn EnergyTerm<Ctx>]) -> bool {
         self.options.decouple_aux
+            && self.options.aux_prior_share < 1.0
             && !rigid
             && self.num_aux > 0
             && terms.iter().any(|t| t.pose_only_prior())
     }
 
     /// After [`LmSolver::solve_step`] (whose factor `ws.factor` holds): the auxiliary part of
-    /// the step from `ws.free_rhs`; the step is kept as it is if that solution is not finite.
+    /// the step from `ws.free_rhs`, blended with the joint step by
+    /// [`LmOptions::aux_prior_share`]; the step is kept as it is if that solution is not finite.
     fn decoupled_aux_step(&self, ws: &mut LmWorkspace) {
         let chol = Cholesky::pack_dirty(std::mem::replace(&mut ws.factor, DMatrix::zeros(0, 0)));
         chol.solve_mut(&mut ws.free_rhs);
@@ -565,7 +592,14 @@ impl LmSolver {
         let n = self.num_dofs;
         let aux = &ws.free_rhs.as_slice()[n..];
         if aux.iter().all(|v| v.is_finite()) {
-            ws.step.as_mut_slice()[n..].copy_from_slice(aux);
+            let s = self.options.aux_prior_share;
+            for (joint, free) in ws.step.as_mut_slice()[n..].iter_mut().zip(aux) {
+                *joint = if s == 0.0 {
+                    *free
+                } else {
+                    s * *joint + (1.0 - s) * free
+                };
+            }
         }
     }
 

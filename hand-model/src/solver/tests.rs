@@ -1022,6 +1022,11 @@ impl LmCallback<SkeletonCtx<'_>> for AuxCell<'_> {
 
 /// Solve the coupled problem (with the prior or not) from θ = β = 0; returns (θ_j, β).
 fn solve_coupled(decouple: bool, with_prior: bool) -> (f64, f64) {
+    solve_shared(decouple, with_prior, 0.0)
+}
+
+/// [`solve_coupled`] with [`LmOptions::aux_prior_share`] set through the solver.
+fn solve_shared(decouple: bool, with_prior: bool, share: f64) -> (f64, f64) {
     let t = default_right_hand();
     let sk = &t.skeleton;
     let dof = sk
@@ -1040,7 +1045,8 @@ fn solve_coupled(decouple: bool, with_prior: bool) -> (f64, f64) {
         decouple_aux: decouple,
         ..opts(60, 0, 1e-3)
     };
-    let solver = LmSolver::new(sk, 1, options).unwrap();
+    let mut solver = LmSolver::new(sk, 1, options).unwrap();
+    solver.set_aux_prior_share(share);
     let mut ws = solver.workspace();
     let mut pose = Pose::zeros(sk);
     let mut ctx = SkeletonCtx::new(sk, &pose);
@@ -1083,4 +1089,32 @@ fn decoupled_aux_step_keeps_the_pose_prior_out_of_the_shape() {
     assert_eq!(solve_coupled(true, false), solve_coupled(false, false));
     let (t, b) = solve_coupled(false, false);
     assert!((t - 0.5).abs() < 1e-6 && (b - 0.5).abs() < 1e-6, "{t} {b}");
+}
+
+#[test]
+fn a_share_of_the_prior_in_the_aux_step_moves_the_fixed_point_linearly() {
+    // With the prior's gradient scaled by s in β's step, the fixed point is θ = 9/58 whatever
+    // s (from θ's row: 5·∂E/∂θ = −∂E/∂β) and β = 25/58 + (1 − s)·18/841 (from β's row:
+    // ∂E_data/∂β = 20 (1 − s) θ / 29): s = 0 is the decoupled point above, s = 1 the joint.
+    for share in [0.25, 0.75] {
+        let (t, b) = solve_shared(true, true, share);
+        let expected = 25.0 / 58.0 + (1.0 - share) * 18.0 / 841.0;
+        assert!((t - 9.0 / 58.0).abs() < 2e-5, "θ: {t}");
+        assert!(
+            (b - expected).abs() < 2e-5,
+            "β at s = {share}: {b}, expected {expected}"
+        );
+    }
+    // s = 1 is the joint step bit for bit; out-of-range shares are clamped, NaN means joint.
+    assert_eq!(solve_shared(true, true, 1.0), solve_coupled(false, true));
+    assert_eq!(
+        solve_shared(true, true, f64::NAN),
+        solve_coupled(false, true)
+    );
+    assert_eq!(solve_shared(true, true, -3.0), solve_coupled(true, true));
+    let bad = LmOptions {
+        aux_prior_share: 1.5,
+        ..LmOptions::default()
+    };
+    assert_eq!(bad.validate(), Err(OptionsError::AuxPriorShare));
 }
