@@ -227,6 +227,30 @@
 //! points ≈ 38 % of the frame, the shape rows ≈ 13 %, the m2d render ≈ 12 % (`Footprint::span`
 //! 3.7 → 2.8 %), the front-facing substitutes ≈ 5 %, the Cholesky factorizations ≈ 4 %, the
 //! re-posing and residuals (`TrackingCtx::update`) ≈ 2.4 %.
+//!
+//! Then (branch `speed14`): no change kept. Counted over the 60 timed frames (per frame, 7
+//! calls of 2 373 points): 16 611 projections, 11 781 kept, 4 830 full searches (1 957 in the
+//! first call, 1 549 in the third; 92 % find the same element again), ≈ 23 000 element
+//! evaluations in them (≈ 4.75 a search, 80 % wedges, 62 % ending beyond the gap). Simulated
+//! in place: a per-point lower bound for every element (its bounding ball's, or its distance
+//! where the search evaluated it), each worn down by its own element's motion, would keep
+//! 2 654 of the 4 830 searched points; only the evaluated distances (the rest at the capped
+//! margin) 229 — what the single margin loses is the far elements that moved a lot (a bending
+//! finger seen from the palm), whose balls stay beyond reach. Tried (digests unchanged; same
+//! shared machine, pinned, binaries alternated 8–10 times; callgrind instruction counts over the
+//! whole bench): (1) the ball tier bounding each element within reach by the larger of its
+//! current ball bound and `reach − δ_e`, the runner left out (the margin does not bound it):
+//! searches 4 830 → 4 166 a frame, but +0.8 % instructions (the scan no longer stops at the
+//! first block); per-frame minima `correspondences` 3 123 → 3 248 µs (1.04), `track` 4 688 →
+//! 4 860 µs (1.04); as a fallback after the old tier, +1.6 % instructions, 1.05 / 1.04;
+//! (2) per-point rows of `f32` bounds per element (the larger of its ball bound and the
+//! search's margin, plus the element's motion accumulated since, rebased every 64 mm), read by
+//! the keep test when the tiers' margin is spent: searches 4 830 → 3 742 a frame (−23 %), but
+//! +6 % instructions (filling 32 lanes per search, the 300 KB of rows carried per frame) and
+//! per-frame minima `correspondences` 3 148 → 3 581 µs (1.14), `track` 4 759 → 5 168 µs (1.09).
+//! A saved search is worth ≈ 200 ns, so bookkeeping per search or per kept point must stay
+//! within a few tens of instructions for such bounds to pay; recording the search's own
+//! evaluated distances (the simulated 2 654) and vectorising the fill are what is left to try.
 
 #[path = "../tests/common/mod.rs"]
 mod common;
