@@ -29,17 +29,17 @@
 //! 5.9 mm middle phalanx, which the estimate swapped; 14/15 draws converging at σ = 0.3, mean
 //! E_β 0.93 mm).
 //!
-//! Status before the noise-scaled decoupling of β's step from the pose prior (session 11; the
-//! CI draw 0 went 0.67 → 0.50 mm with it, `honline_calib`'s docs) — IEKF, 15 draws per σ, 20 s,
-//! noise-free, `full_size`'s IEKF part, run by hand: mean
-//! E_β 0.508 / 0.508 / 0.509 / 0.560 mm at σ = 0.1 / 0.2 / 0.3 / 0.4, max 0.685 / 0.688 /
-//! 0.686 / 1.275 mm, every draw converging (15/15 at every σ). The end is the same per user
-//! whatever σ (seed 0: 0.484 / 0.480 / 0.487 / 0.481 mm): started at the user's own shape
-//! (σ = 0) the estimate also ends 0.44–0.48 mm away — a per-user floor of the estimator, not
-//! of the initialization; σ = 0.4 draw 5 alone stops above it (1.28 mm). Under ToF noise E_β
-//! ended above 1 mm (measured with the earlier protocol); tracking with the online estimate
-//! does not come within 10 % of tracking with the true template (the CI tests guard the levels
-//! reached instead).
+//! Status (IEKF, 15 draws per σ, 20 s, noise-free; `full_size`'s IEKF protocol, run by hand
+//! in session 11 with β's step decoupled from the pose prior on exact data, the default since):
+//! mean E_β 0.309 / 0.308 / 0.309 / 0.359 mm at σ = 0.1 / 0.2 / 0.3 / 0.4 (± 0.067 / 0.066 /
+//! 0.068 / 0.200), max 0.409 / 0.409 / 0.413 / 1.040 mm, every draw converging (15/15 at every
+//! σ), last-third keypoints 0.85 / 0.85 / 0.85 / 1.00 mm. With the joint step (before): mean
+//! 0.508 / 0.508 / 0.509 / 0.560, max 0.685 / 0.688 / 0.686 / 1.275 mm, 15/15. The end is the
+//! same per user whatever σ: a per-user floor of the estimator, not of the initialization (with
+//! the joint step, started at the user's own shape, σ = 0, it also ended 0.44–0.48 mm away);
+//! σ = 0.4 draw 5 alone stops above it (1.04 mm; 1.28 before). Under ToF noise E_β ends near
+//! 1 mm and tracking with the online estimate does not come within 10 % of tracking with the
+//! true template (the CI tests guard the levels reached instead).
 
 use std::sync::OnceLock;
 
