@@ -594,11 +594,7 @@ impl LmSolver {
         if aux.iter().all(|v| v.is_finite()) {
             let s = self.options.aux_prior_share;
             for (joint, free) in ws.step.as_mut_slice()[n..].iter_mut().zip(aux) {
-                *joint = if s == 0.0 {
-                    *free
-                } else {
-                    s * *joint + (1.0 - s) * free
-                };
+                *joint = s * *joint + (1.0 - s) * free;
             }
         }
     }

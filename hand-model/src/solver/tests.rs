@@ -522,10 +522,11 @@ fn exact_and_augmented_pose_priors_give_the_same_steps() {
         let terms: [&dyn EnergyTerm<SkeletonCtx>; 2] = [&fit, &pca];
         let mut aux_calls = 0;
         let report = {
-            let mut cb = AuxCounter {
-                calls: &mut aux_calls,
-                len: pca.num_aux(),
-            };
+            let len = pca.num_aux();
+            let mut cb = RePoseAnd(|delta: &[f64]| {
+                assert_eq!(delta.len(), len);
+                aux_calls += 1;
+            });
             solver
                 .solve(&mut ws, sk, &mut pose, &mut ctx, &terms, &mut cb)
                 .unwrap()
@@ -602,24 +603,20 @@ fn subspace_pose_prior_holds_the_solve_in_the_pca_subspace() {
     }
 }
 
-struct AuxCounter<'a> {
-    calls: &'a mut usize,
-    len: usize,
-}
+/// [`RePose`], and each auxiliary step handed to a closure.
+struct RePoseAnd<F>(F);
 
-impl LmCallback<SkeletonCtx<'_>> for AuxCounter<'_> {
+impl<F: FnMut(&[f64])> LmCallback<SkeletonCtx<'_>> for RePoseAnd<F> {
     fn prepare(
         &mut self,
         pose: &Pose,
         ctx: &mut SkeletonCtx,
-        _: IterInfo,
+        info: IterInfo,
     ) -> Result<(), TermError> {
-        ctx.set_pose(pose);
-        Ok(())
+        RePose.prepare(pose, ctx, info)
     }
     fn apply_aux(&mut self, _ctx: &mut SkeletonCtx, delta: &[f64]) {
-        assert_eq!(delta.len(), self.len);
-        *self.calls += 1;
+        (self.0)(delta)
     }
 }
 
@@ -1003,23 +1000,6 @@ impl EnergyTerm<SkeletonCtx<'_>> for ToZero {
     }
 }
 
-struct AuxCell<'a>(&'a std::cell::Cell<f64>);
-
-impl LmCallback<SkeletonCtx<'_>> for AuxCell<'_> {
-    fn prepare(
-        &mut self,
-        pose: &Pose,
-        ctx: &mut SkeletonCtx,
-        _: IterInfo,
-    ) -> Result<(), TermError> {
-        ctx.set_pose(pose);
-        Ok(())
-    }
-    fn apply_aux(&mut self, _ctx: &mut SkeletonCtx, delta: &[f64]) {
-        self.0.set(self.0.get() + delta[0]);
-    }
-}
-
 /// Solve the coupled problem (with the prior or not) from θ = β = 0; returns (θ_j, β).
 fn solve_coupled(decouple: bool, with_prior: bool) -> (f64, f64) {
     solve_shared(decouple, with_prior, 0.0)
@@ -1057,7 +1037,7 @@ fn solve_shared(decouple: bool, with_prior: bool, share: f64) -> (f64, f64) {
             &mut pose,
             &mut ctx,
             &terms,
-            &mut AuxCell(&beta),
+            &mut RePoseAnd(|delta: &[f64]| beta.set(beta.get() + delta[0])),
         )
         .unwrap();
     (pose.values[dof], beta.get())
