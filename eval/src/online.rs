@@ -12,7 +12,7 @@ use std::f64::consts::TAU;
 use datasets::subjects::{Subject, MAX_PERTURBATION};
 use hand_model::kinematics::{Pose, Skeleton};
 use hand_model::solver::PcaPrior;
-use hand_model::spheremesh::{default_right_hand, ShapeBasis, ShapeKind};
+use hand_model::spheremesh::{default_right_hand, ShapeBasis, ShapeKind, SphereMeshTemplate};
 use hmodel_spheremesh::{Tracker, TrackerConfig};
 use honline_calib::terms::finger_order_constraints;
 use honline_calib::{
@@ -426,8 +426,31 @@ pub fn run_true_template(
     motion: &CalibrationMotion,
     config: TrackerConfig,
 ) -> anyhow::Result<SyntheticRun> {
+    run_fixed_template(spec, truth, motion, config, None)
+}
+
+/// [`run_true_template`] with the default template instead of the subject's (no calibration at
+/// all): the baseline that online calibration has to beat.
+pub fn run_default_template(
+    spec: &SyntheticSpec,
+    truth: &[f64],
+    motion: &CalibrationMotion,
+    config: TrackerConfig,
+) -> anyhow::Result<SyntheticRun> {
+    run_fixed_template(spec, truth, motion, config, Some(default_right_hand()))
+}
+
+/// Track the rendering of subject `truth` with a fixed template: `template`, or the subject's own
+/// when `None`.
+fn run_fixed_template(
+    spec: &SyntheticSpec,
+    truth: &[f64],
+    motion: &CalibrationMotion,
+    config: TrackerConfig,
+    template: Option<SphereMeshTemplate>,
+) -> anyhow::Result<SyntheticRun> {
     let mut seq = calibration_sequence(spec, truth, motion)?;
-    let template = seq.template().clone();
+    let template = template.unwrap_or_else(|| seq.template().clone());
     let prior = PcaPrior::project_default();
     let mut tracker = Tracker::new(&template, config, Some(&prior))?;
     tracker.set_pose(&motion.pose_at(0.0))?;

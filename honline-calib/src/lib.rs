@@ -75,6 +75,22 @@
 //!   mm), `All` 1.62 / 1.55 / 1.16 (0.129 / 0.132 / 0.109 mm, but the unobserved
 //!   `wrist_length` drifts 4.3 mm); ToF `WithPalm` 1.32 / 1.28 / 1.29, `All` 1.36 / 1.25 /
 //!   1.33. Not the default: mixed on the keypoints, 10–15 more state entries per frame.
+//! - Where the rest of the gap to the true template sits (subject 7, 300 frames): with β
+//!   frozen at the truth the online tracker tracks like the Ch. 3 tracker on the true template
+//!   (1.03 noise-free, 1.01 ToF), so the gap is β alone. Started at the truth, β drifts off —
+//!   noise-free the finger bases' `base_y` ≈ +0.5 mm (ratio 1.68 from the truth; no single term
+//!   causes it: without m2d, collisions, temporal or joint limits ±0.05 mm), under ToF by
+//!   ≈ −4 / −4 / +2.5 mm (pinky / index / middle) with the radii ≈ 2 mm thin (ratio 1.35). The
+//!   per-frame modes are offset the same way (−3.9 ± 0.6 mm for `pinky_base_y`): a bias of the
+//!   data terms under noise, not of the filter; it grows with the noise (σ × 0.25 / 0.5 / 1:
+//!   E_β from the truth 0.39 / 0.59 / 0.92 mm) and is not from the flying pixels (without
+//!   them 0.77 mm). Registering points inside the model along the camera ray (point-to-plane on
+//!   the ray's entry, unbiased for depth noise) instead of the front-facing rule did not help
+//!   (`pinky_base_y` −4.0 mm, the radii then ≈ 2.5 mm thick; not kept).
+//! - Still, online calibration beats none: the same tracker on the default template tracks
+//!   subjects 7 / 8 / 9 at 7.3 / 11.1 / 20.5× the true template's error noise-free and
+//!   1.48 / 1.75 / 3.76× under ToF (subject 7 guarded in `tracking_with_online_calibration_*`;
+//!   8 / 9 measured with β frozen at the template).
 //! - Not yet here: loss detection and re-initialization (the first pose comes from
 //!   [`OnlineCalibrator::set_pose`] or the PCA mean placed on the points).
 //! - The collision term (Ch. 3) tolerates the overlap the model's pills have at the rest pose;
