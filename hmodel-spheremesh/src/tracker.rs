@@ -89,6 +89,9 @@ pub struct TrackerConfig {
     pub front_facing: bool,
     /// The camera of the front-facing test.
     pub view: FrontFacingView,
+    /// Along-ray correspondences within this distance (mm) of the ray's entry into the model
+    /// ([`TrackingCtx::set_ray_gate`]); `None`: the thesis' closest points everywhere.
+    pub ray_gate: Option<f64>,
     /// ℓ1 by IRLS (as htrack/hmodel, ANCHOR-FACTS §5.3).
     pub irls: IrlsParams,
     /// How m2d finds the model outside the silhouette.
@@ -124,6 +127,7 @@ impl Default for TrackerConfig {
             },
             front_facing: true,
             view: FrontFacingView::Perspective,
+            ray_gate: None,
             irls: IrlsParams::default(),
             m2d_mode: M2dMode::Render,
             m2d_stride: 1,
@@ -296,6 +300,7 @@ impl<'m> Tracker<'m> {
         let sk = &template.skeleton;
         let mut ctx = TrackingCtx::new(template, config.view.view(), config.irls.clone())?;
         ctx.set_front_facing(config.front_facing);
+        ctx.set_ray_gate(config.ray_gate);
         ctx.set_m2d(config.enabled.m2d.then_some(config.m2d_mode));
         ctx.set_m2d_stride(config.m2d_stride);
         let PriorSetup {

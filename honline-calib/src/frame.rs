@@ -148,6 +148,7 @@ impl FrameProblem {
     pub(crate) fn context(&self, tc: &TrackerConfig) -> Result<OnlineCtx, OnlineError> {
         let mut tracking = TrackingCtx::owned(self.base.clone(), tc.view.view(), tc.irls.clone())?;
         tracking.set_front_facing(tc.front_facing);
+        tracking.set_ray_gate(tc.ray_gate);
         tracking.set_m2d(tc.enabled.m2d.then_some(tc.m2d_mode));
         tracking.set_m2d_stride(tc.m2d_stride);
         Ok(OnlineCtx {
