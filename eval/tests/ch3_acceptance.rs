@@ -32,10 +32,14 @@ fn sequence(motion: &str, noise: &str, frames: usize) -> SyntheticSequence {
 }
 
 fn track(motion: &str, noise: &str, frames: usize) -> SyntheticRun {
+    track_with(motion, noise, frames, TrackerConfig::default())
+}
+
+fn track_with(motion: &str, noise: &str, frames: usize, config: TrackerConfig) -> SyntheticRun {
     let mut seq = sequence(motion, noise, frames);
     let template = seq.template().clone();
     let prior = PcaPrior::project_default();
-    let mut tracker = Tracker::new(&template, TrackerConfig::default(), Some(&prior)).unwrap();
+    let mut tracker = Tracker::new(&template, config, Some(&prior)).unwrap();
     let run = seq
         .run(|f, t| tracker.track(f, t.frame, t.timestamp), |_| {})
         .unwrap();
@@ -116,6 +120,32 @@ fn teaser_sensor_noise() {
         assert!(s.mean < 6.0, "{noise}: mean keypoint error {} mm", s.mean);
         let under = run.fraction_max_under(20.0);
         assert!(under >= 0.98, "{noise}: {:.1}% under 20 mm", 100.0 * under);
+    }
+}
+
+/// Along-ray correspondences (`TrackerConfig::ray_gate`, off by default: the thesis registers
+/// every point at its closest point) under the two noisy sensor models and on exact depth: the
+/// closest point of a noisy point is biased outward on curved parts (≈ σ² sin²φ / 2r) and the
+/// front-facing rule pulls points behind a silhouette inward, while the residual along the ray
+/// is linear in the depth noise. Measured on the teaser, it tracks better under noise and no
+/// worse without.
+#[test]
+fn along_ray_correspondences_track_better_under_depth_noise() {
+    let along = TrackerConfig {
+        ray_gate: Some(20.0),
+        ..TrackerConfig::default()
+    };
+    for (noise, gain) in [("tof", 0.9), ("structured", 1.0), ("none", 1.02)] {
+        let (thesis, ray) = std::thread::scope(|s| {
+            let h = s.spawn(|| track("teaser", noise, 200).summary().mean);
+            let ray = track_with("teaser", noise, 200, along.clone()).summary().mean;
+            (h.join().unwrap(), ray)
+        });
+        println!(
+            "teaser {noise}, 200 frames: closest points {thesis:.3} mm, along rays {ray:.3} mm ({:.2}×)",
+            ray / thesis
+        );
+        assert!(ray < gain * thesis, "{noise}: along rays {ray} mm vs {thesis} mm");
     }
 }
 

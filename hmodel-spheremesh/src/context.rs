@@ -6,9 +6,9 @@ use std::borrow::Cow;
 
 use hand_model::kinematics::{Pose, PosedSkeleton, Skeleton};
 use hand_model::query::{Coherence, Projection, SphereMeshGeometry, View};
-use hand_model::render::raycast::{cast_ray, cast_ray_element, Ray, RayHit};
-use hand_model::render::{DepthRenderer, Intrinsics, PixelHit, PixelRuns};
-use hand_model::shape::{Element, Sphere};
+use hand_model::render::raycast::{cast_ray_prepared, Ray};
+use hand_model::render::{DepthRenderer, Intrinsics, PixelHit, PixelRuns, PreparedElement};
+use hand_model::shape::Element;
 use hand_model::solver::{IrlsParams, IterInfo, LmCallback, PoseContext, TermError};
 use hand_model::spheremesh::{PosedSphereMesh, SphereMeshTemplate};
 use hand_model::ModelError;
@@ -79,6 +79,8 @@ pub struct TrackingCtx<'m> {
     /// Along-ray correspondences (see [`TrackingCtx::set_ray_gate`]): the largest distance
     /// along the camera ray at which a point is registered at the ray's entry into the model.
     ray_gate: Option<f64>,
+    /// The posed elements prepared for [`TrackingCtx::set_ray_gate`]'s ray casts.
+    prepared: Vec<Option<PreparedElement>>,
     irls: IrlsParams,
     sensor: SensorView,
     m2d: Option<M2dMode>,
@@ -94,27 +96,6 @@ pub struct TrackingCtx<'m> {
     render_mask_valid: bool,
     hits: Vec<PixelHit>,
     pushes: Vec<SilhouettePush>,
-}
-
-/// Where the camera ray through `p` (from the origin) first enters the model, with the elements
-/// culled against the hit on element `seed` (usually the nearest to `p`).
-fn first_hit(spheres: &[Sphere], elements: &[Element], seed: u32, p: &Vector3<f64>) -> Option<RayHit> {
-    let ray = Ray::new(Vector3::zeros(), *p)?;
-    let seeded = elements
-        .get(seed as usize)
-        .and_then(|e| cast_ray_element(&ray, spheres, e));
-    let Some(h) = seeded else {
-        return cast_ray(&ray, spheres, elements);
-    };
-    let nearer = Ray::segment(Vector3::zeros(), *p, 0.0, h.t)
-        .and_then(|r| cast_ray(&r, spheres, elements))
-        .filter(|n| n.t < h.t);
-    Some(nearer.unwrap_or(RayHit {
-        t: h.t,
-        point: h.point,
-        normal: h.normal,
-        element: seed as usize,
-    }))
 }
 
 /// The sensor camera as the renderer's intrinsics.
@@ -195,6 +176,7 @@ impl<'m> TrackingCtx<'m> {
             view,
             front_facing: true,
             ray_gate: None,
+            prepared: Vec::new(),
             irls,
             sensor: SensorView::default(),
             m2d: Some(M2dMode::Render),
@@ -381,6 +363,9 @@ impl<'m> TrackingCtx<'m> {
     /// others are culled by their bounding balls against that hit.
     fn register_along_rays(&mut self, gate: f64) {
         let spheres = &self.posed.spheres;
+        self.prepared.clear();
+        self.prepared
+            .extend(self.elements.iter().map(|e| PreparedElement::new(spheres, e)));
         for (((c, p), u), (r, w)) in self
             .correspondences
             .iter_mut()
@@ -388,7 +373,11 @@ impl<'m> TrackingCtx<'m> {
             .zip(self.directions.iter_mut())
             .zip(self.residuals.iter_mut().zip(self.weights.iter_mut()))
         {
-            let Some(Some(hit)) = c.map(|c| first_hit(spheres, &self.elements, c.element, p)) else {
+            let (Some(seed), Some(ray)) = (c.map(|c| c.element), Ray::new(Vector3::zeros(), *p))
+            else {
+                continue;
+            };
+            let Some(hit) = cast_ray_prepared(&ray, &self.prepared, seed as usize) else {
                 continue;
             };
             if (hit.point - p).norm_squared() > gate * gate {

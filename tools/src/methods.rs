@@ -64,6 +64,9 @@ pub struct TrackSettings {
     pub disabled: Vec<&'static str>,
     /// Sphere-mesh E_m2d mode: `render` or `centers`.
     pub m2d: Option<String>,
+    /// Sphere-mesh along-ray correspondences within this distance (mm,
+    /// `hmodel_spheremesh::TrackerConfig::ray_gate`).
+    pub ray_gate: Option<f64>,
     /// The online calibration's estimator (method `online`; default: the config's, IEKF).
     pub estimator: Option<Estimator>,
 }
@@ -76,6 +79,7 @@ impl Default for TrackSettings {
             rigid_first: true,
             disabled: Vec::new(),
             m2d: None,
+            ray_gate: None,
             estimator: None,
         }
     }
@@ -420,6 +424,15 @@ impl Method for SphereMesh {
 }
 
 /// The `--m2d` mode.
+/// `--ray-gate`: a positive distance in mm.
+fn ray_gate(gate: Option<f64>, current: Option<f64>) -> Result<Option<f64>> {
+    match gate {
+        None => Ok(current),
+        Some(g) if g.is_finite() && g > 0.0 => Ok(Some(g)),
+        Some(g) => bail!("--ray-gate must be a positive distance in mm, got {g}"),
+    }
+}
+
 fn m2d_mode(name: &str) -> Result<M2dMode> {
     match name {
         "render" => Ok(M2dMode::Render),
@@ -442,6 +455,7 @@ impl MethodModel for SphereMeshMethodModel {
         if let Some(m) = &s.m2d {
             cfg.m2d_mode = m2d_mode(m)?;
         }
+        cfg.ray_gate = ray_gate(s.ray_gate, cfg.ray_gate)?;
         apply_switches!(cfg, s, [d2m, m2d]);
         Ok(Box::new(SphereMeshTracker::new(&self.0, cfg, prior)?))
     }
@@ -501,6 +515,7 @@ impl MethodModel for OnlineMethodModel {
         if let Some(m) = &s.m2d {
             tc.m2d_mode = m2d_mode(m)?;
         }
+        tc.ray_gate = ray_gate(s.ray_gate, tc.ray_gate)?;
         apply_switches!(tc, s, [d2m, m2d]);
         Ok(Box::new(OnlineTracker::new(
             &self.template,

@@ -99,6 +99,11 @@ pub struct TrackArgs {
     /// model, §3.3.2) or `centers` (projected sphere centers, §3.6).
     #[arg(long)]
     pub m2d: Option<String>,
+    /// Sphere-mesh: register each point where its camera ray enters the model when that is
+    /// within this many mm of it (point-to-plane, unbiased under depth noise), else at its
+    /// closest point; e.g. `--ray-gate 20`. Default: the thesis' closest points everywhere.
+    #[arg(long, value_name = "MM")]
+    pub ray_gate: Option<f64>,
     /// Disable the collision term (Eq. 2.7).
     #[arg(long)]
     pub no_collision: bool,
@@ -133,6 +138,7 @@ fn disabled_terms(args: &TrackArgs) -> Vec<(&'static str, &'static str)> {
         ("--no-d2m", "d2m", args.no_d2m),
         ("--no-m2d", "m2d", args.no_m2d),
         ("--m2d", "m2d", args.m2d.is_some()),
+        ("--ray-gate", "d2m", args.ray_gate.is_some()),
         ("--no-collision", "collision", args.no_collision),
         ("--no-pose-prior", "pose_prior", args.no_pose_prior),
         ("--no-joint-limits", "joint_limits", args.no_joint_limits),
@@ -156,7 +162,7 @@ fn settings(args: &TrackArgs, method: &dyn Method) -> Result<TrackSettings> {
                 method.terms().join(", ")
             );
         }
-        if flag != "--m2d" {
+        if flag != "--m2d" && flag != "--ray-gate" {
             disabled.push(term);
         }
     }
@@ -166,6 +172,7 @@ fn settings(args: &TrackArgs, method: &dyn Method) -> Result<TrackSettings> {
         rigid_first: !args.no_rigid_first,
         disabled,
         m2d: args.m2d.clone(),
+        ray_gate: args.ray_gate,
         estimator: args.calibrate,
     })
 }

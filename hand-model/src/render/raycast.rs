@@ -258,6 +258,38 @@ pub fn cast_ray_element(ray: &Ray, spheres: &[Sphere], element: &Element) -> Opt
     PreparedElement::new(spheres, element)?.cast(ray)
 }
 
+/// [`cast_ray`] over elements prepared once (`None`: an element that could not be prepared, skipped),
+/// trying element `seed` first so that the others are culled against its hit: the form for
+/// many rays per pose (e.g. one per sensor point, seeded with the point's nearest element).
+/// The same hit as [`cast_ray`] except on exact ties in `t`, which go to `seed`.
+pub fn cast_ray_prepared(
+    ray: &Ray,
+    elements: &[Option<PreparedElement>],
+    seed: usize,
+) -> Option<RayHit> {
+    if !ray.is_valid() {
+        return None;
+    }
+    let hit = |i: usize, t_best: f64| {
+        let e = elements.get(i)?.as_ref()?;
+        e.cast_unchecked(ray, t_best).map(|h| RayHit {
+            t: h.t,
+            point: h.point,
+            normal: h.normal,
+            element: i,
+        })
+    };
+    let mut best = hit(seed, ray.t_max);
+    for i in (0..elements.len()).filter(|&i| i != seed) {
+        if let Some(h) = hit(i, best.map_or(ray.t_max, |b| b.t)) {
+            if best.is_none_or(|b| h.t < b.t) {
+                best = Some(h);
+            }
+        }
+    }
+    best
+}
+
 /// First hit of a ray with a whole sphere-mesh model (Eq. 3.6's union of elements), with
 /// bounding-sphere culling; ties go to the lower element index.
 ///
@@ -674,6 +706,10 @@ mod tests {
         pose.set(&template.skeleton, "global_ry", 0.4).unwrap();
         let posed = PosedSphereMesh::new(&template, &pose);
         let elements: Vec<Element> = template.elements.iter().map(|e| e.element).collect();
+        let prepared: Vec<_> = elements
+            .iter()
+            .map(|e| PreparedElement::new(&posed.spheres, e))
+            .collect();
         let mut rng = rng(3);
         let mut hits = 0;
         for _ in 0..3000 {
@@ -686,6 +722,10 @@ mod tests {
                 .min_by(|a, b| a.1.t.total_cmp(&b.1.t));
             let got = cast_ray(&ray, &posed.spheres, &elements);
             assert_eq!(got.map(|h| h.t), best.map(|b| b.1.t));
+            // Seeded with any element, the prepared form finds the same first hit.
+            let seed = rng.random_range(0..elements.len());
+            let seeded = cast_ray_prepared(&ray, &prepared, seed);
+            assert_eq!(seeded.map(|h| h.t), got.map(|h| h.t));
             if let (Some(g), Some((i, h))) = (got, best) {
                 hits += 1;
                 assert!(g.element == i || h.t == g.t);
