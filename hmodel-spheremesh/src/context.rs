@@ -364,8 +364,11 @@ impl<'m> TrackingCtx<'m> {
     fn register_along_rays(&mut self, gate: f64) {
         let spheres = &self.posed.spheres;
         self.prepared.clear();
-        self.prepared
-            .extend(self.elements.iter().map(|e| PreparedElement::new(spheres, e)));
+        self.prepared.extend(
+            self.elements
+                .iter()
+                .map(|e| PreparedElement::new(spheres, e)),
+        );
         for (((c, p), u), (r, w)) in self
             .correspondences
             .iter_mut()

@@ -35,6 +35,23 @@
 //! - Collisions: finger pills only, rest-pose overlaps tolerated, hmodel's under-relaxation
 //!   `fraction` left out (it makes the rows inconsistent with the energy; LM damping limits the
 //!   step instead).
+//! - Beyond the thesis, off by default: along-ray correspondences
+//!   ([`TrackerConfig::ray_gate`], `hands track --ray-gate 20`). A depth sensor's noise moves a
+//!   point along its camera ray, so a point whose ray enters the model within the gate is
+//!   registered at that entry, point-to-plane (the residual is then linear in the noise and
+//!   zero-mean at the true model); the closest point of a noisy point is biased outward on
+//!   curved parts (≈ σ² sin²φ / 2r on a cylinder of radius r at viewing angle φ) and the
+//!   front-facing rule pulls the points behind a silhouette inward. Measured
+//!   (`eval/tests/ch3_acceptance.rs`, teaser, 200 frames, true template, mean keypoint error):
+//!   ToF 1.512 → 0.864 mm (0.57×), structured light 0.325 → 0.316 mm, noise-free 0.178 →
+//!   0.174 mm; on `eval::online`'s calibration motion (300 frames, ToF, subjects 7 / 8, last
+//!   third) 2.56 → 1.81 and 2.20 → 1.62 mm. Requiring the entry on the closest point's
+//!   element (a guard against misassociation) lost most of the gain (2.09 / 1.99 mm): mixing
+//!   the two rules at the elements' junctions biases again. Its cost is why it is not the
+//!   default: one ray per point and iteration against the prepared elements
+//!   ([`hand_model::render::raycast::cast_ray_prepared`], seeded with the point's nearest
+//!   element) made the online bench's correspondences ≈ 4× slower (per-frame minima 4.1 →
+//!   17.9 ms, load ≈ 2), against the ≥ 200 frames/s goal of the online calibrator.
 //! - Priors: τ_pose = 1e4 on the project's PCA prior, joint limits 1e7, htrack's temporal
 //!   weights (3, 3; hmodel used 0.05) and uniform damping λ = 100 (shared with Ch. 2).
 //!

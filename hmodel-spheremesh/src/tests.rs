@@ -281,7 +281,14 @@ fn along_ray_correspondences_are_unbiased_under_depth_noise() {
     let t = default_right_hand();
     let truth = test_pose(&t);
     let exact = rendered_points(&t, &truth, 4000);
-    let mut ctx = TrackingCtx::new(&t, View::Perspective { camera_center: Vector3::zeros() }, IrlsParams::default()).unwrap();
+    let mut ctx = TrackingCtx::new(
+        &t,
+        View::Perspective {
+            camera_center: Vector3::zeros(),
+        },
+        IrlsParams::default(),
+    )
+    .unwrap();
     let (mut closest, mut along_ray) = (0.0, 0.0);
     for seed in 0..4 {
         ctx.set_points(&with_depth_noise(&exact, 4.0, seed));
@@ -295,7 +302,10 @@ fn along_ray_correspondences_are_unbiased_under_depth_noise() {
     println!("mean residual at the true pose, σ = 4 mm: closest {closest:.3} mm, along rays {along_ray:.3} mm");
     // The mean of 16 000 residuals of σ ≈ 3 mm varies by ≈ 0.03 mm.
     assert!(along_ray.abs() < 0.08, "along rays: {along_ray}");
-    assert!(closest - along_ray > 0.1, "closest points {closest}, along rays {along_ray}");
+    assert!(
+        closest - along_ray > 0.1,
+        "closest points {closest}, along rays {along_ray}"
+    );
 }
 
 #[test]
@@ -304,32 +314,67 @@ fn along_ray_correspondences_are_the_rays_first_entry() {
     let t = default_right_hand();
     let truth = test_pose(&t);
     let points = with_depth_noise(&rendered_points(&t, &truth, 1500), 4.0, 5);
-    let mut ctx = TrackingCtx::new(&t, View::Perspective { camera_center: Vector3::zeros() }, IrlsParams::default()).unwrap();
+    let mut ctx = TrackingCtx::new(
+        &t,
+        View::Perspective {
+            camera_center: Vector3::zeros(),
+        },
+        IrlsParams::default(),
+    )
+    .unwrap();
     ctx.set_ray_gate(Some(20.0));
     ctx.set_points(&points);
     let mut pose = truth.clone();
     pose.set(&t.skeleton, "global_tx", 2.0).unwrap();
     ctx.update(&pose, false).unwrap();
-    let mut thesis = TrackingCtx::new(&t, View::Perspective { camera_center: Vector3::zeros() }, IrlsParams::default()).unwrap();
+    let mut thesis = TrackingCtx::new(
+        &t,
+        View::Perspective {
+            camera_center: Vector3::zeros(),
+        },
+        IrlsParams::default(),
+    )
+    .unwrap();
     thesis.set_points(&points);
     thesis.update(&pose, false).unwrap();
     let posed = PosedSphereMesh::new(&t, &pose);
     let elements: Vec<_> = t.elements.iter().map(|e| e.element).collect();
     let mut along = 0;
-    for ((c, p), front) in ctx.correspondences().iter().zip(ctx.points()).zip(thesis.correspondences()) {
+    for ((c, p), front) in ctx
+        .correspondences()
+        .iter()
+        .zip(ctx.points())
+        .zip(thesis.correspondences())
+    {
         let c = c.expect("every point has a correspondence");
-        let hit = cast_ray(&Ray::new(Vector3::zeros(), *p).unwrap(), &posed.spheres, &elements);
+        let hit = cast_ray(
+            &Ray::new(Vector3::zeros(), *p).unwrap(),
+            &posed.spheres,
+            &elements,
+        );
         match hit {
             Some(h) if (h.point - p).norm() <= 20.0 => {
                 along += 1;
-                assert!((c.point - h.point).norm() < 1e-6, "{:?} vs {:?}", c.point, h.point);
+                assert!(
+                    (c.point - h.point).norm() < 1e-6,
+                    "{:?} vs {:?}",
+                    c.point,
+                    h.point
+                );
                 // Where two elements meet at the hit either may hold it; else the same normal.
                 if c.element as usize == h.element {
                     assert!((c.normal - h.normal).norm() < 1e-6);
                 }
             }
-            _ => assert_eq!(Some(c), *front, "a point off its ray keeps its front-facing point"),
+            _ => assert_eq!(
+                Some(c),
+                *front,
+                "a point off its ray keeps its front-facing point"
+            ),
         }
     }
-    assert!(along > 1000, "{along} of 1500 points registered along their rays");
+    assert!(
+        along > 1000,
+        "{along} of 1500 points registered along their rays"
+    );
 }

@@ -562,6 +562,8 @@ fn track_spheremesh_writes_records_and_overlays() {
         "--no-collision",
         "--m2d",
         "centers",
+        "--ray-gate",
+        "20",
         "--out",
         &s(&out),
         "--overlay",
@@ -614,6 +616,11 @@ fn track_rejects_switches_of_the_other_model() {
         (
             vec!["--model", "spheremesh", "--m2d", "bogus"],
             ["--m2d", "bogus"],
+        ),
+        (vec!["--ray-gate", "20"], ["--ray-gate", "cylinders"]),
+        (
+            vec!["--model", "spheremesh", "--ray-gate", "0"],
+            ["--ray-gate", "positive"],
         ),
         (
             vec!["--model", "spheremesh", "--template", "missing.json"],
