@@ -265,6 +265,14 @@ fn with_depth_noise(points: &[Vector3<f64>], sigma: f64, seed: u64) -> Vec<Vecto
         .collect()
 }
 
+/// A context seen through the sensor's pinhole at the origin, default IRLS.
+fn pinhole_ctx(t: &SphereMeshTemplate) -> TrackingCtx<'_> {
+    let view = View::Perspective {
+        camera_center: Vector3::zeros(),
+    };
+    TrackingCtx::new(t, view, IrlsParams::default()).unwrap()
+}
+
 /// Mean over the points with a correspondence of the residual along the footpoint's normal
 /// (`> 0`: the points lie outside the model on average).
 fn mean_normal_residual(ctx: &TrackingCtx<'_>) -> f64 {
@@ -281,14 +289,7 @@ fn along_ray_correspondences_are_unbiased_under_depth_noise() {
     let t = default_right_hand();
     let truth = test_pose(&t);
     let exact = rendered_points(&t, &truth, 4000);
-    let mut ctx = TrackingCtx::new(
-        &t,
-        View::Perspective {
-            camera_center: Vector3::zeros(),
-        },
-        IrlsParams::default(),
-    )
-    .unwrap();
+    let mut ctx = pinhole_ctx(&t);
     let (mut closest, mut along_ray) = (0.0, 0.0);
     for seed in 0..4 {
         ctx.set_points(&with_depth_noise(&exact, 4.0, seed));
@@ -314,27 +315,13 @@ fn along_ray_correspondences_are_the_rays_first_entry() {
     let t = default_right_hand();
     let truth = test_pose(&t);
     let points = with_depth_noise(&rendered_points(&t, &truth, 1500), 4.0, 5);
-    let mut ctx = TrackingCtx::new(
-        &t,
-        View::Perspective {
-            camera_center: Vector3::zeros(),
-        },
-        IrlsParams::default(),
-    )
-    .unwrap();
+    let mut ctx = pinhole_ctx(&t);
     ctx.set_ray_gate(Some(20.0));
     ctx.set_points(&points);
     let mut pose = truth.clone();
     pose.set(&t.skeleton, "global_tx", 2.0).unwrap();
     ctx.update(&pose, false).unwrap();
-    let mut thesis = TrackingCtx::new(
-        &t,
-        View::Perspective {
-            camera_center: Vector3::zeros(),
-        },
-        IrlsParams::default(),
-    )
-    .unwrap();
+    let mut thesis = pinhole_ctx(&t);
     thesis.set_points(&points);
     thesis.update(&pose, false).unwrap();
     let posed = PosedSphereMesh::new(&t, &pose);

@@ -423,16 +423,20 @@ impl Method for SphereMesh {
     }
 }
 
-/// The `--m2d` mode.
-/// `--ray-gate`: a positive distance in mm.
+/// The along-ray gate: `--ray-gate` if given, else the config's; either must be a positive
+/// distance in mm (the tracker would silently ignore another).
 fn ray_gate(gate: Option<f64>, current: Option<f64>) -> Result<Option<f64>> {
-    match gate {
-        None => Ok(current),
-        Some(g) if g.is_finite() && g > 0.0 => Ok(Some(g)),
-        Some(g) => bail!("--ray-gate must be a positive distance in mm, got {g}"),
+    match gate.or(current) {
+        Some(g) if !(g.is_finite() && g > 0.0) => {
+            bail!(
+                "--ray-gate (or the config's ray_gate) must be a positive distance in mm, got {g}"
+            )
+        }
+        g => Ok(g),
     }
 }
 
+/// The `--m2d` mode.
 fn m2d_mode(name: &str) -> Result<M2dMode> {
     match name {
         "render" => Ok(M2dMode::Render),
