@@ -4,9 +4,9 @@
 //! parameter is (Tkach et al. 2017, thesis §4.3).
 //!
 //! - State `x_n = [θ_n; β_n]`: the sphere-mesh pose and the honline shape vector β
-//!   (ANCHOR-FACTS §2.5), restricted to [`ShapeSubset::Observable`] (60 of 75 entries: the palm
-//!   centers, the wrist extents, the thumb membrane and `thumb_additional` are in the null space
-//!   of the data terms or buried, and stay at the template).
+//!   (ANCHOR-FACTS §2.5), all 75 entries by default ([`ShapeSubset::All`]; the thesis' null
+//!   space — palm centers, wrist extents, thumb membrane and `thumb_additional` — held at the
+//!   template is [`ShapeSubset::Observable`], 60 entries: a real hand differs along it too).
 //! - Per frame, the joint pose+shape Levenberg–Marquardt of Eq. 4.2–4.4 ([`OnlineCalibrator`]):
 //!   the tracker's terms (Ch. 3: d2m, m2d, collision, temporal, joint limits, PCA pose prior) with
 //!   the data rows extended by exact β columns (shared with the offline calibration,
@@ -40,14 +40,15 @@
 //!   zeroed the off-diagonal ones. Two phalanges of a straight finger are then only certain in
 //!   their sum (Fig. 4.3), not each.
 //! - Every solved frame is a measurement, scaled by [`OnlineConfig::measurement_weight`]
-//!   (1/20), instead of honline's every 20th frame from frame 40 with measurement noise 1000.
+//!   (1/2), instead of honline's every 20th frame from frame 40 with measurement noise 1000:
+//!   with 1/20 the shape-space prior, in every frame's solve, outweighs the belief and holds
+//!   the estimate toward the template.
 //! - E_iekf uses `Σ̂⁻¹` (Eq. 4.11), not honline's `H²`, and only the joint estimator runs it.
 //! - The Laplace information comes from the data terms only (Eq. 4.5), the pose marginalized;
 //!   priors and barriers shape the mode but are not counted as measurements.
 //! - Known biases (measured by `eval/tests/ch4_acceptance.rs`): the PCA pose prior pulls
 //!   poses that are off its subspace toward it and the free β absorbs part of it (≈ 0.4 mm E_β
-//!   started at the truth; 0.04 mm without the pose prior); palm centers are held at the
-//!   template, so a subject with another palm size is fitted by the palm radii instead; under
+//!   started at the truth; 0.04 mm without the pose prior); under
 //!   the ToF noise model the radii come out ≈ 0.8 mm thin on average, and the certainty (in the
 //!   units of the IRLS-weighted data term, honline's too) is far above what the error supports.
 //! - Against the pose prior's bias, by default with the joint estimator:
@@ -68,13 +69,19 @@
 //!   freely and the prior's pull is what holds that direction (decoupled, draw 0 σ = 0.2: split
 //!   E_β 0.37 → 0.62 mm, per-frame 1.33 → 2.52). (The full system solved without the prior for
 //!   β's part gave the same noise-free gains at the cost of a second factorization.)
-//! - Palm centers: with [`ShapeSubset::WithPalm`] they are estimated too (a random subject's
-//!   palm spheres leave the palm's hull, so they are not in the null space), with
-//!   [`ShapeSubset::All`] also the wrist and membrane entries. Noise-free subjects 7 / 8 / 9
-//!   (with the decoupling above): `WithPalm` 1.85 / 1.92 / 1.38 (E_β 0.163 / 0.182 / 0.144
-//!   mm), `All` 1.62 / 1.55 / 1.16 (0.129 / 0.132 / 0.109 mm, but the unobserved
-//!   `wrist_length` drifts 4.3 mm); ToF `WithPalm` 1.32 / 1.28 / 1.29, `All` 1.36 / 1.25 /
-//!   1.33. Not the default: mixed on the keypoints, 10–15 more state entries per frame.
+//! - The measurements above are with the defaults before session 14 (the null-space subset,
+//!   measurement weight 1/20, ω_shape-space 5). Session 14 found the gap to the true template
+//!   noise-free in those three: the subset held palm centers, wrist width and thumb base at
+//!   the template, which the radii absorbed (palm radii ≈ 2 mm thick), and with 1/20 the
+//!   shape-space prior outweighed the belief in every frame's solve. Estimating all 75
+//!   entries with the measurement weight 1/2 and ω_shape-space 2.5 (the defaults since):
+//!   noise-free subjects 7 / 8 / 9 / 10 / 11 / 12, last-third keypoint error over the true
+//!   template's **1.95 / 1.83 / 1.76 / – / – / – → 1.08 / 1.09 / 0.83 / 1.23 / 1.08 / 1.11**,
+//!   E_β at the end 0.369 / 0.370 / 0.164 → 0.071 / 0.051 / 0.062 / 0.075 / 0.063 / 0.066
+//!   mm; Fig. 4.7 CI draw 0 (10 s) E_β 0.49 → 0.18 mm at every σ; ToF subjects 7 / 8 / 9
+//!   1.31 / 1.29 / 1.32 → 1.33 / 1.18 / 1.30. What remains noise-free is mostly a trade
+//!   between a finger's proximal and middle phalanx lengths (±0.2–0.4 mm on the ring and
+//!   pinky).
 //! - Where the rest of the gap to the true template sits (subject 7, 300 frames): with β
 //!   frozen at the truth the online tracker tracks like the Ch. 3 tracker on the true template
 //!   (1.03 noise-free, 1.01 ToF), so the gap is β alone. Started at the truth, β drifts off —
