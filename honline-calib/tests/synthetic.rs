@@ -217,3 +217,23 @@ fn set_shape_starts_from_the_given_shape() {
     );
     assert!(after < before, "E_β {before} → {after}");
 }
+
+#[test]
+fn absurd_settings_are_refused_with_their_name() {
+    let base = default_right_hand();
+    let cases: [(&str, fn(&mut OnlineConfig)); 3] = [
+        ("measurement_weight", |c| c.measurement_weight = -0.5),
+        ("shape_prior", |c| c.shape_prior = f64::NAN),
+        ("initial_information", |c| c.initial_information = 0.0),
+    ];
+    for (name, spoil) in cases {
+        let mut config = OnlineConfig::default();
+        spoil(&mut config);
+        let err = OnlineCalibrator::new(&base, config, None)
+            .err()
+            .expect("refused")
+            .to_string();
+        assert!(err.contains(name), "{err}");
+    }
+    assert!(OnlineCalibrator::new(&base, OnlineConfig::default(), None).is_ok());
+}
