@@ -82,8 +82,8 @@
 //!   0.85 / 1.25 / 1.08 / 1.12** (within 10 % on three of the six), E_β at the end 0.369 /
 //!   0.370 / 0.164 / 0.410 / 0.544 / 0.216 → ≈ 0.05–0.08 mm; Fig. 4.7 (15 draws per σ, 20 s)
 //!   mean E_β 0.31 → 0.17 mm at σ ≤ 0.3 and 0.36 → 0.23 mm at σ = 0.4, every draw
-//!   converging; ToF subjects 7 / 8 / 9 1.31 / 1.29 / 1.32 → 1.33 / 1.18 / 1.30 (measured
-//!   without the ramp). What remains noise-free is mostly a trade between a finger's proximal
+//!   converging; ToF subjects 7 / 8 / 9 1.31 / 1.29 / 1.32 → 1.34 / 1.20 / 1.24 (subject 7
+//!   at 20 s: 1.42). What remains noise-free is mostly a trade between a finger's proximal
 //!   and middle phalanx lengths (±0.2–0.4 mm on the ring and pinky) and the PCA pose prior's
 //!   pull on the poses: without the prior in both trackers, subjects 7 / 8 track at 0.16 /
 //!   0.16 mm against the true template's 0.13 / 0.12 mm (0.36 / 0.30 with it).
