@@ -264,8 +264,8 @@
 //! Then (session 14): every β entry in the state by default (`ShapeSubset::All`, 75 entries
 //! against 60; the accuracy gain is in `honline_calib`'s docs), the measurement weight 1/2 over
 //! a 50-frame ramp (values, not work). The same bench with `ShapeSubset::Observable` and with
-//! the default, alternated 4 times, pinned (this session's machine ran ≈ 35 % slower than
-//! session 11's on identical work): per-frame minima `track` 6 315–6 684 → 6 702–6 966 µs
+//! the default, alternated 4 times, pinned (the machine was slower this session: the
+//! Observable frame, the same work as above, took ≈ 1.35× the minima above): per-frame minima `track` 6 315–6 684 → 6 702–6 966 µs
 //! (median of the runs 6 608 → 6 766, ≈ 1.03), `solve` 1 749–1 868 → 2 025–2 192 µs (≈ 1.13:
 //! the larger factorizations and shape rows), `laplace` 110 → 137 µs, `filter` 100 → 152 µs,
 //! `correspondences` unchanged. The price of the larger state is ≈ 3 % of the frame.
