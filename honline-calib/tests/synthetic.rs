@@ -221,7 +221,8 @@ fn set_shape_starts_from_the_given_shape() {
 #[test]
 fn absurd_settings_are_refused_with_their_name() {
     let base = default_right_hand();
-    let cases: [(&str, fn(&mut OnlineConfig)); 3] = [
+    type Spoil = fn(&mut OnlineConfig);
+    let cases: [(&str, Spoil); 3] = [
         ("measurement_weight", |c| c.measurement_weight = -0.5),
         ("shape_prior", |c| c.shape_prior = f64::NAN),
         ("initial_information", |c| c.initial_information = 0.0),
