@@ -64,10 +64,10 @@ pub struct OnlineConfig {
     /// pull toward the template in each frame's solve, so too small a weight leaves the
     /// estimate at that per-frame balance. Measured (`eval/tests/ch4_acceptance.rs` tracking
     /// scenario, 300 frames, last-third keypoint error over the true template's, every entry
-    /// estimated): noise-free subject 7 1/20 → 1.62, 1/5 → 1.17, 1/2 → 1.11 (with ω_shape-space
-    /// 5); started at the truth with the null-space subset, 1/100 → 2.83, 1/20 → 1.68, 1/5 →
-    /// 1.23, 1 → 1.27. Under ToF (subjects 7 / 8, ω 2.5) 1/20 → 1.32 / 1.25, 1/2 → 1.33 /
-    /// 1.18.
+    /// estimated, no ramp): noise-free subject 7 1/20 → 1.62, 1/5 → 1.17, 1/2 → 1.11 (with
+    /// ω_shape-space 5); started at the truth with the null-space subset, 1/100 → 2.83, 1/20 →
+    /// 1.68, 1/5 → 1.23, 1 → 1.27. Under ToF (subjects 7 / 8, ω 2.5) 1/20 → 1.32 / 1.25, 1/2 →
+    /// 1.33 / 1.18.
     pub measurement_weight: f64,
     /// Measurements over which the weight grows linearly to [`Self::measurement_weight`]
     /// (the n-th solved frame since the last [`OnlineCalibrator::set_shape`] counts

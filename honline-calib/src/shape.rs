@@ -25,9 +25,10 @@ pub enum ShapeSubset {
     /// another thumb base, and whatever entries are held at the template push the error into
     /// the radii and lengths next to them (with Observable, the palm radii end ≈ 2 mm thick).
     /// Measured (`eval/tests/ch4_acceptance.rs` tracking scenario, noise-free, 300 frames,
-    /// measurement weight 1/2, last-third keypoint error over the true template's): subjects
-    /// 7 / 8 / 9 Observable 1.43 / – / –, WithPalm and `wrist_width` 1.31 / 1.37 / 1.06, All
-    /// 1.08 / 1.09 / 0.83. `wrist_length`, under the wristband, does drift (4–11 mm on those
+    /// measurement weight 1/2 without its ramp, last-third keypoint error over the true
+    /// template's): subjects 7 / 8 / 9 Observable 1.43 / – / – (1.38 on 7 with the ramp),
+    /// WithPalm and `wrist_width` 1.31 / 1.37 / 1.06, All 1.08 / 1.09 / 0.83 (1.09 / 1.12 /
+    /// 0.85 with the ramp). `wrist_length`, under the wristband, does drift (4–11 mm on those
     /// subjects) but holding it alone at the template tracked worse (1.28 / 1.34 / 1.06): it
     /// moves the visible wrist spheres too.
     #[default]
