@@ -239,15 +239,20 @@ fn depth_only_segmentation_matches_the_hand() {
     assert!(q.len() > 300, "only {} frames measured", q.len());
     // Measured (this commit): precision median 0.989, p10 0.935; recall median 0.977, p10 0.907
     // (before: precision 1.000 / 0.736, recall 0.880 / 0.673 — fingers or fists cut off as the
-    // "forearm", wrists cut short).
+    // "forearm", wrists cut short). Session 15 (the growth repeated for a lone thumb tip and
+    // around the palm, occluded fingers added, holes filled for the palm circle): precision
+    // median 0.976, p10 0.883 → 0.935; recall median 0.997 → 1.000, p10 0.910 → 0.953; the
+    // worst frame's min(precision, recall) 0.024 → 0.651.
     assert!(
-        pm >= 0.96 && p10 >= 0.85,
+        pm >= 0.96 && p10 >= 0.90,
         "precision median {pm:.3}, p10 {p10:.3}"
     );
     assert!(
-        rm >= 0.95 && r10 >= 0.85,
+        rm >= 0.95 && r10 >= 0.92,
         "recall median {rm:.3}, p10 {r10:.3}"
     );
+    let worst_min = worst.first().map_or(0.0, |f| f.precision.min(f.recall));
+    assert!(worst_min >= 0.5, "worst frame: {worst_min:.3}");
 }
 
 #[test]

@@ -19,9 +19,26 @@ pub struct HandSegment {
     pub count: usize,
     /// Estimated palm center (camera frame, mm), when a hand was found.
     pub palm_center: Option<Vector3<f64>>,
-    /// The wristband (wristband segmentation only); used by the wrist term of Eq. 2.4 and to
-    /// tell where the silhouette was cut.
+    /// The wristband (wristband segmentation), or the forearm cut of the depth-only
+    /// segmentation standing in for one (its center the centroid of the arm's slice at the cut,
+    /// its axis toward the hand, reach 0); used by the wrist term of Eq. 2.4 and to tell where
+    /// the silhouette was cut ([`Wristband::hides`]).
     pub wristband: Option<Wristband>,
+}
+
+impl HandSegment {
+    /// No hand, the mask sized to `depth` (keeps its allocation).
+    fn clear(&mut self, depth: &DepthImage) {
+        self.mask.width = depth.width;
+        self.mask.height = depth.height;
+        self.mask.data.clear();
+        self.mask
+            .data
+            .resize(depth.width as usize * depth.height as usize, 0);
+        self.count = 0;
+        self.palm_center = None;
+        self.wristband = None;
+    }
 }
 
 /// The wristband found by [`segment_wristband`].
@@ -60,6 +77,8 @@ pub struct SegmentScratch {
     exits: Vec<usize>,
     /// Geodesic distance (mm) inside the component from the exits, per image pixel.
     geo: Vec<f32>,
+    /// A region that may be an occluded hand part.
+    region: Vec<usize>,
 }
 
 /// Parameters of the depth-only segmentation.
@@ -103,6 +122,30 @@ impl Default for DepthOnlyParams {
         }
     }
 }
+
+/// Half-width (mm) of the slice of the arm at the forearm cut whose centroid stands in for a
+/// wristband's center.
+const SECTION_HALF_WIDTH_MM: f64 = 5.0;
+
+/// A component that reaches less far (mm) from the seed is a part of the hand alone — a thumb
+/// tip in front of a fist seen end-on, beyond a depth step larger than the growth's — and is
+/// grown again with the step doubled (up to `MAX_STEP_FACTOR` times the parameter's).
+const MIN_HAND_EXTENT_MM: f64 = 60.0;
+/// See [`MIN_HAND_EXTENT_MM`].
+const MAX_STEP_FACTOR: f64 = 4.0;
+/// How far (mm) the hand may reach from its palm center (fingertips, the forearm cut beyond
+/// it): a palm center closer than this to the growth volume's surface means the volume —
+/// centered on the nearest point, which may lie on a forearm pointing at the camera — may have
+/// cut the hand, and the growth is repeated in the volume centered on the palm.
+const HAND_REACH_MM: f64 = 150.0;
+
+/// Largest depth step (mm) across an occluding contour inside the hand (a finger in front of
+/// another, the thumb across the palm); the background and the body lie farther behind.
+const OCCLUSION_STEP_MM: f64 = 80.0;
+/// Largest hole (px) inside the component that [`fill_holes`] fills for the inscribed circles.
+const MAX_FILLED_HOLE_PX: usize = 40;
+/// Smallest hand part (px) that [`add_occluded_parts`] adds.
+const MIN_PART_PIXELS: usize = 20;
 
 /// Pixels from the image border within which a component pixel is an exit.
 const BORDER_PX: usize = 2;
@@ -176,7 +219,23 @@ fn find_seed(depth: &DepthImage, near: u16, far: u16) -> Option<usize> {
 ///    centroid of the pixels 30–110 mm geodesically closer to the exits) at
 ///    `cut_palm_radii` palm radii (within `cut_range`) from the palm center; only pixels
 ///    geodesically closer to the exits than the palm center are cut, so fingers folded back
-///    across the plane are kept.
+///    across the plane are kept; the cut is reported as [`HandSegment::wristband`] (a band at
+///    the cut, reach 0), so that the trackers treat it as they treat a band;
+/// 5. hand parts that an occlusion separates from the component (a finger whose base hides
+///    behind the thumb folded across the palm) are added: regions across a depth step below
+///    80 mm, of 20 pixels or more, wholly within 150 mm of the palm and on the hand's side of
+///    the cut.
+///
+/// The growth is repeated with the depth step doubled when the component reaches less than
+/// 60 mm from the seed (a thumb tip in front of a fist seen end-on, up to 4 times the
+/// step), and once in the volume centered on the palm when the
+/// palm lies within 150 mm of the volume's surface (the nearest point, the first
+/// center, may lie on a forearm pointing at the camera). The inscribed circles are measured
+/// with small holes (up to 40 px) filled.
+///
+/// Measured (`datasets/tests/depth_segmentation.rs`, 360 frames; before → after the repeated
+/// growth, the occluded parts and the filled holes): precision p10 0.883 → 0.935, recall p10
+/// 0.910 → 0.953; the worst recall 0.024 → 0.68 (a fist seen end-on: the thumb tip alone).
 ///
 /// An empty segment (count 0) when nothing hand-sized is in range. Allocation-free once the
 /// buffers of `out` and `scratch` have grown to the image size.
@@ -187,6 +246,52 @@ pub fn segment_depth_only(
     out: &mut HandSegment,
     scratch: &mut SegmentScratch,
 ) {
+    let Some(seed) = find_seed(depth, params.near, params.far) else {
+        out.clear(depth);
+        return;
+    };
+    let mut growth = Growth {
+        seed,
+        center: point(depth, camera, seed),
+        max_step: params.max_step,
+    };
+    let mut recentered = false;
+    loop {
+        let extent = segment_pass(depth, camera, params, &growth, out, scratch);
+        if extent < MIN_HAND_EXTENT_MM && growth.max_step < MAX_STEP_FACTOR * params.max_step {
+            growth.max_step *= 2.0;
+            continue;
+        }
+        match out.palm_center {
+            Some(palm)
+                if !recentered && (palm - growth.center).norm() > params.radius - HAND_REACH_MM =>
+            {
+                growth.center = palm;
+                recentered = true;
+            }
+            _ => return,
+        }
+    }
+}
+
+/// Where one pass of [`segment_depth_only`] grows: from `seed` across depth steps below
+/// `max_step`, inside the sphere of the parameters' radius around `center`.
+struct Growth {
+    seed: usize,
+    center: Vector3<f64>,
+    max_step: f64,
+}
+
+/// One pass of [`segment_depth_only`]; returns the component's extent (mm, the largest
+/// distance of its points from the seed; 0 when it is too small to count).
+fn segment_pass(
+    depth: &DepthImage,
+    camera: &Camera,
+    params: &DepthOnlyParams,
+    growth: &Growth,
+    out: &mut HandSegment,
+    scratch: &mut SegmentScratch,
+) -> f64 {
     let SegmentScratch {
         dt,
         queue,
@@ -196,18 +301,11 @@ pub fn segment_depth_only(
         t,
         exits,
         geo,
+        region,
     } = scratch;
     let (w, h) = (depth.width as usize, depth.height as usize);
-    out.mask.width = depth.width;
-    out.mask.height = depth.height;
-    out.mask.data.clear();
-    out.mask.data.resize(w * h, 0);
-    out.count = 0;
-    out.palm_center = None;
-    out.wristband = None;
-    let Some(seed) = find_seed(depth, params.near, params.far) else {
-        return;
-    };
+    out.clear(depth);
+    let seed = growth.seed;
     let seed_p = point(depth, camera, seed);
     let r2 = params.radius * params.radius;
     queue.clear();
@@ -237,11 +335,11 @@ pub fn segment_depth_only(
                 if out.mask.data[j] != 0
                     || d < params.near
                     || d > params.far
-                    || (d as f64 - d0).abs() > params.max_step
+                    || (d as f64 - d0).abs() > growth.max_step
                 {
                     break;
                 }
-                if (point(depth, camera, j) - seed_p).norm_squared() > r2 {
+                if (point(depth, camera, j) - growth.center).norm_squared() > r2 {
                     exit = true;
                     break;
                 }
@@ -258,7 +356,7 @@ pub fn segment_depth_only(
     pixels.extend((0..w * h).filter(|&i| out.mask.data[i] != 0));
     if pixels.len() < params.min_pixels {
         out.mask.data.iter_mut().for_each(|m| *m = 0);
-        return;
+        return 0.0;
     }
     // Inscribed radius of every silhouette pixel: distance to the background, computed on the
     // component's bounding box (plus a background border) rather than the whole image.
@@ -278,6 +376,7 @@ pub fn segment_depth_only(
     for &i in pixels.iter() {
         inv.data[(i / w - v0 + 1) * cw + (i % w - u0 + 1)] = 0;
     }
+    fill_holes(inv, queue, region);
     dt.compute(inv);
     let dt = &*dt;
     let mm_per_px = |i: usize| depth.data[i] as f64 * camera.depth_unit_mm / camera.fx;
@@ -287,6 +386,7 @@ pub fn segment_depth_only(
     };
     pts.clear();
     pts.extend(pixels.iter().map(|&i| point(depth, camera, i)));
+    let extent = pts.iter().map(|p| (p - seed_p).norm()).fold(0.0, f64::max);
     if exits.is_empty() {
         // No exit: the whole arm part is in view and in range. Short: a hand alone; long: a
         // forearm stump, at the end of the principal axis farther from the widest inscribed
@@ -419,15 +519,171 @@ pub fn segment_depth_only(
             let dir = to_wrist.normalize();
             let cut =
                 (params.cut_palm_radii * palm_r).clamp(params.cut_range[0], params.cut_range[1]);
+            let (mut section, mut n_section) = (Vector3::zeros(), 0usize);
             for (k, &i) in pixels.iter().enumerate() {
-                if (geo[i] as f64) < g_palm && (pts[k] - palm).dot(&dir) > cut {
+                if (geo[i] as f64) >= g_palm {
+                    continue;
+                }
+                let along = (pts[k] - palm).dot(&dir);
+                if along > cut {
                     out.mask.data[i] = 0;
+                }
+                if (along - cut).abs() <= SECTION_HALF_WIDTH_MM {
+                    section += pts[k];
+                    n_section += 1;
+                }
+            }
+            // The cut stands in for a wristband: the wrist term gets the forearm's line and
+            // the model's wrist beyond the cut is not evidence against the model.
+            out.wristband = Some(Wristband {
+                center: if n_section > 0 {
+                    section / n_section as f64
+                } else {
+                    palm + dir * cut
+                },
+                axis: -dir,
+                reach: 0.0,
+            });
+        }
+    }
+    let palm = pts[palm_k];
+    out.palm_center = Some(palm);
+    add_occluded_parts(
+        depth,
+        camera,
+        growth.max_step,
+        palm,
+        out,
+        pixels,
+        queue,
+        region,
+    );
+    out.count = out.mask.count();
+    extent
+}
+
+/// The 4-neighbours of pixel `i` in a `w × h` image.
+fn neighbours4(i: usize, w: usize, h: usize) -> impl Iterator<Item = usize> {
+    let (u, v) = (i % w, i / w);
+    [
+        (u > 0).then(|| i - 1),
+        (u + 1 < w).then(|| i + 1),
+        (v > 0).then(|| i - w),
+        (v + 1 < h).then(|| i + w),
+    ]
+    .into_iter()
+    .flatten()
+}
+
+/// Turn the small holes of `inv` (background pixels, nonzero, that the background around the
+/// component does not reach; zero = the component) into component pixels: the inscribed
+/// circles are measured to the silhouette's outline, not to speckle inside it — flying pixels
+/// at a fist's inner occluding contours punch holes that shrank the fist's circles below the
+/// forearm's, and the palm was placed on the forearm. Holes larger than
+/// [`MAX_FILLED_HOLE_PX`] (a gap enclosed by curled fingers) stay. `inv` has a background
+/// border, where the flood starts.
+fn fill_holes(inv: &mut Mask, queue: &mut VecDeque<usize>, hole: &mut Vec<usize>) {
+    const OUTSIDE: u8 = 2;
+    const HOLE: u8 = 3;
+    let (w, h) = (inv.width as usize, inv.height as usize);
+    let data = &mut inv.data;
+    let mut flood = |data: &mut [u8], start: usize, mark: u8, hole: &mut Vec<usize>| {
+        hole.clear();
+        queue.clear();
+        queue.push_back(start);
+        data[start] = mark;
+        while let Some(i) = queue.pop_front() {
+            hole.push(i);
+            for j in neighbours4(i, w, h) {
+                if data[j] == 1 {
+                    data[j] = mark;
+                    queue.push_back(j);
                 }
             }
         }
+    };
+    flood(data, 0, OUTSIDE, hole);
+    for start in 0..data.len() {
+        if data[start] == 1 {
+            flood(data, start, HOLE, hole);
+            if hole.len() <= MAX_FILLED_HOLE_PX {
+                hole.iter().for_each(|&i| data[i] = 0);
+            }
+        }
     }
-    out.count = out.mask.count();
-    out.palm_center = Some(pts[palm_k]);
+    for m in data.iter_mut() {
+        *m = u8::from(*m != 0);
+    }
+}
+
+/// Mask value of a pixel visited by [`add_occluded_parts`] and not taken.
+const VISITED: u8 = 2;
+
+/// Add the hand's parts that an occlusion separates from the grown component — a finger whose
+/// base hides behind the thumb folded across the palm: the growth does not cross the depth
+/// step at the occluding contour. A region next to the silhouette across a step below
+/// [`OCCLUSION_STEP_MM`], itself grown across steps below `max_step`, is added when it has at
+/// least [`MIN_PART_PIXELS`] pixels and lies wholly within [`HAND_REACH_MM`] of the palm center
+/// and on the hand's side of the forearm cut (the background, the body and the forearm reach
+/// beyond; flying pixels and speckle are smaller).
+#[allow(clippy::too_many_arguments)]
+fn add_occluded_parts(
+    depth: &DepthImage,
+    camera: &Camera,
+    max_step: f64,
+    palm: Vector3<f64>,
+    out: &mut HandSegment,
+    pixels: &[usize],
+    queue: &mut VecDeque<usize>,
+    region: &mut Vec<usize>,
+) {
+    let (w, h) = (depth.width as usize, depth.height as usize);
+    let reach2 = HAND_REACH_MM * HAND_REACH_MM;
+    let band = out.wristband;
+    let on_hand = |j: usize| {
+        let p = point(depth, camera, j);
+        (p - palm).norm_squared() <= reach2 && !band.is_some_and(|b| b.hides(&p))
+    };
+    let neighbours = |i: usize| neighbours4(i, w, h);
+    let mask = &mut out.mask.data;
+    for &i in pixels {
+        if mask[i] != 1 {
+            continue;
+        }
+        for s in neighbours(i) {
+            let (d0, d) = (depth.data[i] as f64, depth.data[s]);
+            if mask[s] != 0 || d == 0 || (d as f64 - d0).abs() > OCCLUSION_STEP_MM {
+                continue;
+            }
+            // Grow the whole region from `s` (each pixel is visited once over all regions, so
+            // a refused region cannot be entered again from another of its pixels).
+            region.clear();
+            queue.clear();
+            queue.push_back(s);
+            mask[s] = VISITED;
+            let mut inside = true;
+            while let Some(j) = queue.pop_front() {
+                if inside {
+                    inside = on_hand(j);
+                    region.push(j);
+                }
+                let dj = depth.data[j] as f64;
+                for k in neighbours(j) {
+                    let dk = depth.data[k];
+                    if mask[k] == 0 && dk != 0 && (dk as f64 - dj).abs() <= max_step {
+                        mask[k] = VISITED;
+                        queue.push_back(k);
+                    }
+                }
+            }
+            if inside && region.len() >= MIN_PART_PIXELS {
+                region.iter().for_each(|&j| mask[j] = 1);
+            }
+        }
+    }
+    mask.iter_mut()
+        .filter(|m| **m == VISITED)
+        .for_each(|m| *m = 0);
 }
 
 /// Parameters of the wristband segmentation (ANCHOR-FACTS §5.6; OpenCV HSV ranges).
@@ -528,14 +784,7 @@ pub fn segment_wristband(
         label[s] = next;
         while let Some(i) = stack.pop() {
             size += 1;
-            let (u, v) = (i % w, i / w);
-            let nbrs = [
-                (u > 0).then(|| i - 1),
-                (u + 1 < w).then(|| i + 1),
-                (v > 0).then(|| i - w),
-                (v + 1 < h).then(|| i + w),
-            ];
-            for j in nbrs.into_iter().flatten() {
+            for j in neighbours4(i, w, h) {
                 if band[j] && label[j] == 0 {
                     label[j] = next;
                     stack.push(j);
