@@ -7,6 +7,7 @@ use hand_model::solver::terms::{Damping, DampingParams, JointLimits, JointLimits
 use hand_model::solver::{EnergyTerm, LmOptions, NormalEquations, PoseContext};
 use nalgebra::{DMatrix, DVector, Matrix2xX};
 use sensor_io::dt::DistanceTransform;
+use sensor_io::preprocess::Wristband;
 use sensor_io::{Camera, Mask};
 
 use crate::terms::E2d;
@@ -144,6 +145,49 @@ fn e2d_rows_match_finite_differences_of_projected_points() {
 /// flexing or moving away (with the thesis' λ = 100 on every DOF it does, the tracker relies on
 /// E3D for that); the rotations and joints are therefore damped hard (λ = 1e7) so that the test
 /// sees the push on the translations.
+/// Model pixels where the segmentation cannot see the hand (beyond a wristband or the
+/// depth-only forearm cut) are not pushed: a band whose hidden side holds the pixels with
+/// camera y beyond the model's median takes exactly those pushes away.
+#[test]
+fn e2d_does_not_push_what_the_band_hides() {
+    let model = default_right_hand_cylinders();
+    let target = target_pose(&model);
+    let start = shifted(&model, &target, &[("global_tx", 10.0)]);
+    let mut ctx = TrackingCtx::new(&model, View::Orthographic, IrlsParams::default());
+    *ctx.sensor_mut() = silhouette_of(&model, &target);
+    ctx.update(&start, false).unwrap();
+    let mut ys = Vec::new();
+    E2d::for_each_push(&ctx, |p| {
+        ys.push(p.point.y);
+        Ok(())
+    })
+    .unwrap();
+    ys.sort_by(f64::total_cmp);
+    let cut = ys[ys.len() / 2];
+    let kept = ys.iter().filter(|&&y| y <= cut).count();
+    ctx.sensor_mut().wristband = Some(Wristband {
+        center: nalgebra::Vector3::new(0.0, cut, 0.0),
+        axis: nalgebra::Vector3::new(0.0, -1.0, 0.0),
+        reach: 0.0,
+    });
+    let mut n = 0;
+    E2d::for_each_push(&ctx, |p| {
+        assert!(
+            p.point.y <= cut,
+            "a hidden pixel was pushed: y {}",
+            p.point.y
+        );
+        n += 1;
+        Ok(())
+    })
+    .unwrap();
+    assert!(
+        ys.len() > 200 && n == kept,
+        "{} pushes, {n} kept of {kept}",
+        ys.len()
+    );
+}
+
 #[test]
 fn e2d_alone_moves_a_shifted_model_back_into_the_silhouette() {
     let model = default_right_hand_cylinders();

@@ -55,6 +55,13 @@ pub struct SilhouettePush {
 ///   of the bone's chain),
 /// - energy `ω₂ Σ‖r‖²` (the weight multiplies `JᵀJ` once, see [`NormalEquations`]).
 ///
+/// Beyond htrack: a rendered pixel whose model point the segmentation hides
+/// ([`crate::SensorView::hides`]: under or beyond the wristband, past the depth-only forearm
+/// cut) is not pushed — the silhouette is cut there whatever the hand looks like (the
+/// sphere-mesh m2d term does the same). Measured (`hands track --model cylinders`, 8 synthetic
+/// sequences of 240 frames, random subjects, mean keypoint error summed over them): wristband
+/// 57.97 → 57.92 mm, depth-only segmentation 62.74 → 58.63 mm (fist ToF 8.52 → 6.77).
+///
 /// # Pixel center vs projected point
 /// Eq. 2.3 writes the residual with the pixel `p`; we use `π(x)` as the current value. At the
 /// linearization point the two agree (`x` lies on the ray through the pixel center, so `π(x)`
@@ -115,6 +122,11 @@ impl E2d {
             let Some(hit) = raster.hit(i as usize) else {
                 continue;
             };
+            // Where the segmentation cannot see the hand (under or beyond the wristband, past
+            // the depth-only forearm cut) a model pixel outside the silhouette is no evidence.
+            if sensor.hides(&hit.point) {
+                continue;
+            }
             f(&SilhouettePush {
                 pixel: (u, v),
                 point: hit.point,
