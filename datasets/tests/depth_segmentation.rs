@@ -52,7 +52,6 @@ fn measure(params: &DepthOnlyParams) -> Vec<FrameQuality> {
     let w = cam.width as usize;
     let mut out = Vec::new();
     let mut seg = HandSegment::default();
-    let mut scratch = SegmentScratch::default();
     let mut seq = 0usize;
     for motion_name in MOTIONS {
         let mut combo = 0usize;
@@ -71,6 +70,8 @@ fn measure(params: &DepthOnlyParams) -> Vec<FrameQuality> {
                     ..Default::default()
                 };
                 let mut synth = Synthesizer::new(&base, &subject.beta, config).expect("synth");
+                // One per sequence: it carries the previous frame's palm as a hint.
+                let mut scratch = SegmentScratch::default();
                 for k in 0..FRAMES_PER_SEQUENCE {
                     let frame = (k * n + n / 2) / FRAMES_PER_SEQUENCE;
                     let t = frame as f64 / 60.0;

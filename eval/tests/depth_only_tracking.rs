@@ -8,9 +8,12 @@
 //! circle's holes and reported its cut as a band — fist ToF 2.22 / 13.85 mm, teaser noise-free
 //! 0.22 / 1.13, teaser ToF 1.48 / 2.20, rotation_fast ToF 4.18 / 9.77, rotation_fast
 //! noise-free 0.31 / 10.61; after — 2.22 / 2.35, 0.22 / 0.25, 1.48 / 1.62, 4.18 / 4.24, 0.31 /
-//! 4.24. The last one is not yet within the band's: during the fast turn (frames 157–215) the
-//! tracker drifts away on the depth-only frames (other seeds of the motion: 0.67 / 0.96, 1.23 /
-//! 2.52, 0.62 / 1.39 mm); its bound is a regression guard.
+//! 4.24. The last one drifted during the fast turn (frames 157–215): seen edge-on, the palm
+//! was barely wider than the bunched fingers, the largest inscribed circle jumped to the
+//! fingers and the forearm cut went through the palm. With the previous frame's palm as a hint
+//! (a circle within 40 mm of it at least 0.75 of the largest is preferred): 2.22 / 2.34, 0.22 /
+//! 0.24, 1.48 / 1.62, 4.18 / 4.20, 0.31 / 1.26 — still not within the band's; its bound is a
+//! regression guard.
 
 use eval::synthetic::{SyntheticSequence, SyntheticSpec};
 use hand_model::solver::PcaPrior;
@@ -47,7 +50,7 @@ fn depth_only_segmentation_tracks_like_the_wristband() {
         ("teaser", "none", 1.2),
         ("teaser", "tof", 1.2),
         ("rotation_fast", "tof", 1.2),
-        ("rotation_fast", "none", 20.0),
+        ("rotation_fast", "none", 5.0),
     ];
     let results: Vec<(f64, f64)> = std::thread::scope(|s| {
         let handles: Vec<_> = cases

@@ -64,7 +64,8 @@ impl Wristband {
 }
 
 /// Reusable buffers of [`segment_depth_only`], so that segmenting a frame allocates nothing once
-/// the buffers have grown to the image size.
+/// the buffers have grown to the image size, and the previous frame's palm center (a hint for
+/// the next frame's): use one per sequence.
 #[derive(Clone, Debug, Default)]
 pub struct SegmentScratch {
     dt: DistanceTransform,
@@ -79,6 +80,9 @@ pub struct SegmentScratch {
     geo: Vec<f32>,
     /// A region that may be an occluded hand part.
     region: Vec<usize>,
+    /// The palm center of the last segmented frame (a hint for the next frame's; cleared by
+    /// a frame without a hand).
+    last_palm: Option<Vector3<f64>>,
 }
 
 /// Parameters of the depth-only segmentation.
@@ -146,6 +150,11 @@ const OCCLUSION_STEP_MM: f64 = 80.0;
 const MAX_FILLED_HOLE_PX: usize = 40;
 /// Smallest hand part (px) that [`add_occluded_parts`] adds.
 const MIN_PART_PIXELS: usize = 20;
+
+/// How far (mm) the palm center may move from the previous frame's and still be preferred.
+const PALM_COHERENCE_MM: f64 = 40.0;
+/// How large (fraction of the largest) the circle near the previous palm must be to be chosen.
+const PALM_COHERENCE_RATIO: f64 = 0.75;
 
 /// Pixels from the image border within which a component pixel is an exit.
 const BORDER_PX: usize = 2;
@@ -231,7 +240,9 @@ fn find_seed(depth: &DepthImage, near: u16, far: u16) -> Option<usize> {
 /// step), and once in the volume centered on the palm when the
 /// palm lies within 150 mm of the volume's surface (the nearest point, the first
 /// center, may lie on a forearm pointing at the camera). The inscribed circles are measured
-/// with small holes (up to 40 px) filled.
+/// with small holes (up to 40 px) filled. The palm center prefers a circle near the previous
+/// frame's (kept in `scratch`: use one scratch per sequence) when it is nearly as large as the
+/// largest (a hand turning edge-on).
 ///
 /// Measured (`datasets/tests/depth_segmentation.rs`, 360 frames; before → after the repeated
 /// growth, the occluded parts and the filled holes): precision p10 0.883 → 0.935, recall p10
@@ -248,6 +259,7 @@ pub fn segment_depth_only(
 ) {
     let Some(seed) = find_seed(depth, params.near, params.far) else {
         out.clear(depth);
+        scratch.last_palm = None;
         return;
     };
     let mut growth = Growth {
@@ -269,7 +281,10 @@ pub fn segment_depth_only(
                 growth.center = palm;
                 recentered = true;
             }
-            _ => return,
+            _ => {
+                scratch.last_palm = out.palm_center;
+                return;
+            }
         }
     }
 }
@@ -302,6 +317,7 @@ fn segment_pass(
         exits,
         geo,
         region,
+        last_palm,
     } = scratch;
     let (w, h) = (depth.width as usize, depth.height as usize);
     out.clear(depth);
@@ -423,16 +439,13 @@ fn segment_pass(
         }
     }
     let palm_k;
-    let mut palm_r = 0.0;
     if exits.is_empty() {
         // A hand alone: the largest inscribed circle, no cut.
-        palm_k = (0..pixels.len())
-            .map(|k| (k, radius_mm(pixels[k])))
-            .max_by(|a, b| a.1.total_cmp(&b.1))
-            .map_or(0, |(k, r)| {
-                palm_r = r;
-                k
-            });
+        (palm_k, _) = pick_palm(
+            (0..pixels.len()).map(|k| (k, radius_mm(pixels[k]))),
+            pts,
+            *last_palm,
+        );
     } else {
         // Geodesic distance from the exits (label-correcting BFS, 8-connected).
         // Only component pixels are read: reset those.
@@ -488,14 +501,14 @@ fn segment_pass(
             .filter(|g| g.is_finite())
             .fold(0.0f32, f32::max) as f64;
         let reach = 0.75 * params.max_hand_length;
-        palm_k = (0..pixels.len())
-            .filter(|&k| geo[pixels[k]].is_finite() && geo[pixels[k]] as f64 >= far_end - reach)
-            .map(|k| (k, radius_mm(pixels[k])))
-            .max_by(|a, b| a.1.total_cmp(&b.1))
-            .map_or(0, |(k, r)| {
-                palm_r = r;
-                k
-            });
+        let palm_r;
+        (palm_k, palm_r) = pick_palm(
+            (0..pixels.len())
+                .filter(|&k| geo[pixels[k]].is_finite() && geo[pixels[k]] as f64 >= far_end - reach)
+                .map(|k| (k, radius_mm(pixels[k]))),
+            pts,
+            *last_palm,
+        );
         let palm = pts[palm_k];
         let g_palm = geo[pixels[palm_k]] as f64;
         // Toward the wrist: the pixels 30–110 mm geodesically closer to the exits than the
@@ -614,6 +627,33 @@ fn fill_holes(inv: &mut Mask, queue: &mut VecDeque<usize>, hole: &mut Vec<usize>
     for m in data.iter_mut() {
         *m = u8::from(*m != 0);
     }
+}
+
+/// The palm center among `candidates` (point index, inscribed radius in mm): the largest
+/// inscribed circle, unless the previous frame's palm `last` has a circle within
+/// [`PALM_COHERENCE_MM`] at least [`PALM_COHERENCE_RATIO`] as large — a hand turning edge-on
+/// shows a palm barely wider than its bunched fingers, and the largest circle then jumped to the
+/// fingers and the forearm cut through the palm. `(0, 0.0)` when there is no candidate.
+fn pick_palm(
+    candidates: impl Iterator<Item = (usize, f64)>,
+    pts: &[Vector3<f64>],
+    last: Option<Vector3<f64>>,
+) -> (usize, f64) {
+    let (mut best, mut near) = ((0, f64::NEG_INFINITY), (0, f64::NEG_INFINITY));
+    for (k, r) in candidates {
+        if r > best.1 {
+            best = (k, r);
+        }
+        if r > near.1 && last.is_some_and(|p| (pts[k] - p).norm() <= PALM_COHERENCE_MM) {
+            near = (k, r);
+        }
+    }
+    let chosen = if near.1 >= PALM_COHERENCE_RATIO * best.1 {
+        near
+    } else {
+        best
+    };
+    (chosen.0, chosen.1.max(0.0))
 }
 
 /// Mask value of a pixel visited by [`add_occluded_parts`] and not taken.
