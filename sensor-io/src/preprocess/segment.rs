@@ -245,8 +245,9 @@ fn find_seed(depth: &DepthImage, near: u16, far: u16) -> Option<usize> {
 /// largest (a hand turning edge-on).
 ///
 /// Measured (`datasets/tests/depth_segmentation.rs`, 360 frames; before → after the repeated
-/// growth, the occluded parts and the filled holes): precision p10 0.883 → 0.935, recall p10
-/// 0.910 → 0.953; the worst recall 0.024 → 0.68 (a fist seen end-on: the thumb tip alone).
+/// growth, the occluded parts, the filled holes and the palm hint): precision p10 0.883 →
+/// 0.938, recall p10 0.910 → 0.946; the worst recall 0.024 → 0.75 (a fist seen end-on: the
+/// thumb tip alone). Tracking on it: `eval/tests/depth_only_tracking.rs`.
 ///
 /// An empty segment (count 0) when nothing hand-sized is in range. Allocation-free once the
 /// buffers of `out` and `scratch` have grown to the image size.
