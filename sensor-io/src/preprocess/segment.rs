@@ -915,3 +915,53 @@ pub fn segment_wristband(
         out.palm_center = Some(c);
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Five candidate circles along x: the largest at 100 mm, one of 0.8 of its radius at 0.
+    fn candidates() -> (Vec<Vector3<f64>>, Vec<(usize, f64)>) {
+        let pts = (0..5)
+            .map(|i| Vector3::new(25.0 * i as f64, 0.0, 400.0))
+            .collect();
+        (pts, vec![(0, 8.0), (1, 5.0), (2, 6.0), (3, 7.0), (4, 10.0)])
+    }
+
+    #[test]
+    fn palm_is_the_largest_circle_without_a_hint() {
+        let (pts, c) = candidates();
+        assert_eq!(pick_palm(c.into_iter(), &pts, None), (4, 10.0));
+        assert_eq!(pick_palm(std::iter::empty(), &pts, None), (0, 0.0));
+    }
+
+    #[test]
+    fn palm_stays_near_the_previous_one_when_nearly_as_large() {
+        let (pts, c) = candidates();
+        let near_first = Some(Vector3::new(5.0, 0.0, 400.0));
+        assert_eq!(pick_palm(c.clone().into_iter(), &pts, near_first), (0, 8.0));
+        // A circle near the hint that is too small loses to the largest.
+        let near_second = Some(Vector3::new(50.0, 0.0, 400.0));
+        assert_eq!(pick_palm(c.into_iter(), &pts, near_second), (4, 10.0));
+    }
+
+    #[test]
+    fn small_holes_are_filled_and_large_ones_kept() {
+        // A 12 × 12 background frame around a component with a 1-px hole and a 7 × 7 hole.
+        let (w, h) = (12usize, 12usize);
+        let mut inv = Mask::zeros(w as u32, h as u32);
+        for v in 0..h {
+            for u in 0..w {
+                let border = u == 0 || v == 0 || u == w - 1 || v == h - 1;
+                let big_hole = (3..10).contains(&u) && (3..10).contains(&v);
+                inv.data[v * w + u] = u8::from(border || big_hole);
+            }
+        }
+        inv.data[2 * w + 2] = 1; // the 1-px hole
+        let (mut queue, mut hole) = (VecDeque::new(), Vec::new());
+        fill_holes(&mut inv, &mut queue, &mut hole);
+        assert_eq!(inv.data[2 * w + 2], 0, "the 1-px hole is filled");
+        assert_eq!(inv.data[5 * w + 5], 1, "the 49-px hole stays background");
+        assert_eq!(inv.data[0], 1);
+    }
+}
