@@ -589,6 +589,32 @@ fn neighbours4(i: usize, w: usize, h: usize) -> impl Iterator<Item = usize> {
     .flatten()
 }
 
+/// Breadth-first flood of the `w × h` image `mask` from `start`: `start` and every pixel `k`
+/// 4-connected to a flooded pixel `j` with `enters(mask[k], j, k)` are marked `mark` and handed
+/// to `visit` in flooding order.
+fn flood(
+    mask: &mut [u8],
+    (w, h): (usize, usize),
+    start: usize,
+    mark: u8,
+    queue: &mut VecDeque<usize>,
+    enters: impl Fn(u8, usize, usize) -> bool,
+    mut visit: impl FnMut(usize),
+) {
+    queue.clear();
+    queue.push_back(start);
+    mask[start] = mark;
+    while let Some(j) = queue.pop_front() {
+        visit(j);
+        for k in neighbours4(j, w, h) {
+            if enters(mask[k], j, k) {
+                mask[k] = mark;
+                queue.push_back(k);
+            }
+        }
+    }
+}
+
 /// Turn the small holes of `inv` (background pixels, nonzero, that the background around the
 /// component does not reach; zero = the component) into component pixels: the inscribed
 /// circles are measured to the silhouette's outline, not to speckle inside it — flying pixels
@@ -601,25 +627,14 @@ fn fill_holes(inv: &mut Mask, queue: &mut VecDeque<usize>, hole: &mut Vec<usize>
     const HOLE: u8 = 3;
     let (w, h) = (inv.width as usize, inv.height as usize);
     let data = &mut inv.data;
-    let mut flood = |data: &mut [u8], start: usize, mark: u8, hole: &mut Vec<usize>| {
-        hole.clear();
-        queue.clear();
-        queue.push_back(start);
-        data[start] = mark;
-        while let Some(i) = queue.pop_front() {
-            hole.push(i);
-            for j in neighbours4(i, w, h) {
-                if data[j] == 1 {
-                    data[j] = mark;
-                    queue.push_back(j);
-                }
-            }
-        }
-    };
-    flood(data, 0, OUTSIDE, hole);
+    let background = |m: u8, _: usize, _: usize| m == 1;
+    flood(data, (w, h), 0, OUTSIDE, queue, background, |_| {});
     for start in 0..data.len() {
         if data[start] == 1 {
-            flood(data, start, HOLE, hole);
+            hole.clear();
+            flood(data, (w, h), start, HOLE, queue, background, |i| {
+                hole.push(i)
+            });
             if hole.len() <= MAX_FILLED_HOLE_PX {
                 hole.iter().for_each(|&i| data[i] = 0);
             }
@@ -685,13 +700,12 @@ fn add_occluded_parts(
         let p = point(depth, camera, j);
         (p - palm).norm_squared() <= reach2 && !band.is_some_and(|b| b.hides(&p))
     };
-    let neighbours = |i: usize| neighbours4(i, w, h);
     let mask = &mut out.mask.data;
     for &i in pixels {
         if mask[i] != 1 {
             continue;
         }
-        for s in neighbours(i) {
+        for s in neighbours4(i, w, h) {
             let (d0, d) = (depth.data[i] as f64, depth.data[s]);
             if mask[s] != 0 || d == 0 || (d as f64 - d0).abs() > OCCLUSION_STEP_MM {
                 continue;
@@ -699,24 +713,17 @@ fn add_occluded_parts(
             // Grow the whole region from `s` (each pixel is visited once over all regions, so
             // a refused region cannot be entered again from another of its pixels).
             region.clear();
-            queue.clear();
-            queue.push_back(s);
-            mask[s] = VISITED;
             let mut inside = true;
-            while let Some(j) = queue.pop_front() {
+            let surface = |m: u8, j: usize, k: usize| {
+                let (dj, dk) = (depth.data[j] as f64, depth.data[k]);
+                m == 0 && dk != 0 && (dk as f64 - dj).abs() <= max_step
+            };
+            flood(mask, (w, h), s, VISITED, queue, surface, |j| {
                 if inside {
                     inside = on_hand(j);
                     region.push(j);
                 }
-                let dj = depth.data[j] as f64;
-                for k in neighbours(j) {
-                    let dk = depth.data[k];
-                    if mask[k] == 0 && dk != 0 && (dk as f64 - dj).abs() <= max_step {
-                        mask[k] = VISITED;
-                        queue.push_back(k);
-                    }
-                }
-            }
+            });
             if inside && region.len() >= MIN_PART_PIXELS {
                 region.iter().for_each(|&j| mask[j] = 1);
             }
