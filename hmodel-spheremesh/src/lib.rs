@@ -80,6 +80,8 @@ pub mod terms;
 mod tests;
 mod tracker;
 
-pub use context::{intrinsics, CorrespondenceCallback, M2dMode, SilhouettePush, TrackingCtx};
+pub use context::{
+    intrinsics, CorrespondenceCallback, M2dMode, SilhouettePush, TrackingCtx, DEFAULT_RAY_SLIDE,
+};
 pub use jacobian::{FootpointJacobian, MAX_ELEMENT_DOFS};
 pub use tracker::{EnabledTerms, FrontFacingView, Tracker, TrackerConfig, TrackerError};

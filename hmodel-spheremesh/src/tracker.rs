@@ -18,11 +18,11 @@ use hand_model::solver::{
 };
 use hand_model::spheremesh::{PosedSphereMesh, SphereMeshTemplate};
 use nalgebra::{Vector2, Vector3};
-use sensor_io::preprocess::PreprocessedFrame;
+use sensor_io::preprocess::{NoiseMonitor, PreprocessedFrame};
 use sensor_io::record::HandRecord;
 use serde::{Deserialize, Serialize};
 
-use crate::context::{CorrespondenceCallback, M2dMode, TrackingCtx};
+use crate::context::{CorrespondenceCallback, M2dMode, TrackingCtx, DEFAULT_RAY_SLIDE};
 use crate::terms::{Collision, CollisionParams, D2m, D2mParams, M2d, M2dParams};
 
 /// Which terms of Eq. 3.3 take part (the `--no-<term>` switches of `hands track`).
@@ -90,8 +90,17 @@ pub struct TrackerConfig {
     /// The camera of the front-facing test.
     pub view: FrontFacingView,
     /// Along-ray correspondences within this distance (mm) of the ray's entry into the model
-    /// ([`TrackingCtx::set_ray_gate`]); `None`: the thesis' closest points everywhere.
+    /// ([`TrackingCtx::set_ray_gate`]) on the frames that [`Self::ray_gate_noise`] admits;
+    /// `None`: the thesis' closest points everywhere.
     pub ray_gate: Option<f64>,
+    /// The measured depth noise σ̂ (mm, [`sensor_io::preprocess::NoiseMonitor`]) from which
+    /// the along-ray correspondences run; 0: on every frame. They pay off under noise and
+    /// cost about as much as the closest points again, so exact and quantized depth (σ̂ < 1
+    /// mm) keep the thesis' rule.
+    pub ray_gate_noise: f64,
+    /// How far an along-ray footpoint may lie from the closest point (mm,
+    /// [`TrackingCtx::set_ray_slide`]).
+    pub ray_slide: f64,
     /// ℓ1 by IRLS (as htrack/hmodel, ANCHOR-FACTS §5.3).
     pub irls: IrlsParams,
     /// How m2d finds the model outside the silhouette.
@@ -127,7 +136,9 @@ impl Default for TrackerConfig {
             },
             front_facing: true,
             view: FrontFacingView::Perspective,
-            ray_gate: None,
+            ray_gate: Some(20.0),
+            ray_gate_noise: 1.5,
+            ray_slide: DEFAULT_RAY_SLIDE,
             irls: IrlsParams::default(),
             m2d_mode: M2dMode::Render,
             m2d_stride: 1,
@@ -143,6 +154,15 @@ impl Default for TrackerConfig {
             temporal: TemporalParams::default(),
             loss: LossParams::default(),
         }
+    }
+}
+
+impl TrackerConfig {
+    /// The along-ray gate for data of measured depth noise `sigma` (mm; `None`: not measured
+    /// yet): [`Self::ray_gate`] when [`Self::ray_gate_noise`] admits it.
+    pub fn ray_gate_for(&self, sigma: Option<f64>) -> Option<f64> {
+        let noisy = self.ray_gate_noise <= 0.0 || sigma.is_some_and(|s| s >= self.ray_gate_noise);
+        self.ray_gate.filter(|_| noisy)
     }
 }
 
@@ -287,6 +307,7 @@ pub struct Tracker<'m> {
     problem: Problem<'m>,
     frames: FrameLoop,
     posed: PosedSphereMesh,
+    noise: NoiseMonitor,
 }
 
 impl<'m> Tracker<'m> {
@@ -300,7 +321,8 @@ impl<'m> Tracker<'m> {
         let sk = &template.skeleton;
         let mut ctx = TrackingCtx::new(template, config.view.view(), config.irls.clone())?;
         ctx.set_front_facing(config.front_facing);
-        ctx.set_ray_gate(config.ray_gate);
+        ctx.set_ray_gate(config.ray_gate_for(None));
+        ctx.set_ray_slide(config.ray_slide);
         ctx.set_m2d(config.enabled.m2d.then_some(config.m2d_mode));
         ctx.set_m2d_stride(config.m2d_stride);
         let PriorSetup {
@@ -322,6 +344,7 @@ impl<'m> Tracker<'m> {
             template,
             frames: FrameLoop::new(mean_pose.clone(), config.loss.clone()),
             posed: PosedSphereMesh::new(template, &mean_pose),
+            noise: NoiseMonitor::default(),
             problem: Problem {
                 template,
                 ctx,
@@ -374,6 +397,10 @@ impl<'m> Tracker<'m> {
         let n = frame.points.len();
         if n >= self.frames.loss().min_points.max(1) {
             self.problem.ctx.set_frame(frame);
+            if self.noise.observe(&frame.depth, &frame.hand.mask) {
+                let gate = self.config.ray_gate_for(self.noise.sigma());
+                self.problem.ctx.set_ray_gate(gate);
+            }
         }
         let outcome = self.frames.step(&mut self.problem, n);
         rec.flags = outcome.flags.iter().map(|f| f.to_string()).collect();

@@ -148,7 +148,8 @@ impl FrameProblem {
     pub(crate) fn context(&self, tc: &TrackerConfig) -> Result<OnlineCtx, OnlineError> {
         let mut tracking = TrackingCtx::owned(self.base.clone(), tc.view.view(), tc.irls.clone())?;
         tracking.set_front_facing(tc.front_facing);
-        tracking.set_ray_gate(tc.ray_gate);
+        tracking.set_ray_gate(tc.ray_gate_for(None));
+        tracking.set_ray_slide(tc.ray_slide);
         tracking.set_m2d(tc.enabled.m2d.then_some(tc.m2d_mode));
         tracking.set_m2d_stride(tc.m2d_stride);
         Ok(OnlineCtx {

@@ -13,7 +13,7 @@ use hand_model::spheremesh::{PosedSphereMesh, ShapeBasis, SphereMeshTemplate};
 use hand_model::ModelError;
 use hmodel_spheremesh::{TrackerConfig, TrackingCtx};
 use nalgebra::{DMatrix, DVector, Vector3};
-use sensor_io::preprocess::{depth_noise_with, noise_scale, PreprocessedFrame};
+use sensor_io::preprocess::{noise_scale, NoiseMonitor, PreprocessedFrame};
 use sensor_io::record::HandRecord;
 use serde::{Deserialize, Serialize};
 
@@ -291,10 +291,8 @@ pub struct OnlineCalibrator {
     measurements: usize,
     /// Scratch for it.
     residuals: Vec<f64>,
-    /// The smoothed depth noise σ̂ (mm) of the frames so far, `None` before the first
-    /// measurement; and the frames since the last one.
-    noise: Option<f64>,
-    since_noise: usize,
+    /// The smoothed depth noise σ̂ of the frames so far.
+    noise: NoiseMonitor,
     /// Per-frame buffers of the Laplace information and the filter (k × k, k active β), so
     /// that a frame allocates only its output: the frame's information, the mode, the
     /// marginal certainties and the factorizations' scratch.
@@ -304,11 +302,6 @@ pub struct OnlineCalibrator {
     per_frame: Vec<f64>,
     scratch: InfoScratch,
 }
-
-/// Frames between two measurements of the depth noise ([`OnlineConfig::noise_scaled_prior`]).
-pub const NOISE_INTERVAL: usize = 15;
-/// Weight of a new noise measurement in the smoothed σ̂.
-const NOISE_SMOOTHING: f64 = 0.3;
 
 impl OnlineCalibrator {
     /// Calibrate from `base` (the default template, or any with the honline β basis) with
@@ -342,8 +335,7 @@ impl OnlineCalibrator {
             residual_scale: 1.0,
             measurements: 0,
             residuals: Vec::new(),
-            noise: None,
-            since_noise: 0,
+            noise: NoiseMonitor::default(),
             frame_info: DMatrix::zeros(mean.len(), mean.len()),
             mode: DVector::zeros(mean.len()),
             cumulative: Vec::with_capacity(mean.len()),
@@ -357,10 +349,10 @@ impl OnlineCalibrator {
         })
     }
 
-    /// The smoothed depth noise σ̂ (mm) measured so far ([`OnlineConfig::noise_scaled_prior`];
-    /// `None` before the first measurement or when the scaling is off).
+    /// The smoothed depth noise σ̂ (mm) measured so far ([`NoiseMonitor`]; `None` before the
+    /// first measurement).
     pub fn depth_noise(&self) -> Option<f64> {
-        self.noise
+        self.noise.sigma()
     }
 
     /// The β basis (names, template values, kinds).
@@ -708,31 +700,24 @@ impl OnlineCalibrator {
         }
     }
 
-    /// Every [`NOISE_INTERVAL`] frames (and on the first): measure the frame's depth noise,
-    /// smooth it into σ̂, scale the shape-space prior by `s = max(σ̂ / 1 mm, 1)²` and, with
+    /// When the frame's depth noise was measured ([`NoiseMonitor`]): turn the along-ray
+    /// correspondences on or off ([`TrackerConfig::ray_gate_for`]), and with
+    /// [`OnlineConfig::noise_scaled_prior`] scale the shape-space prior by
+    /// `s = max(σ̂ / 1 mm, 1)²` and, with
     /// [`LmOptions::decouple_aux`](hand_model::solver::LmOptions::decouple_aux), keep the
     /// share `1 − 1/s` of the pose prior's pull in β's step (at least the configured
-    /// [`aux_prior_share`](hand_model::solver::LmOptions::aux_prior_share))
-    /// ([`OnlineConfig::noise_scaled_prior`]).
+    /// [`aux_prior_share`](hand_model::solver::LmOptions::aux_prior_share)).
     fn update_noise(&mut self, frame: &PreprocessedFrame) {
-        if !self.config.noise_scaled_prior {
+        if !self.noise.observe(&frame.depth, &frame.hand.mask) {
             return;
         }
-        let due = self.noise.is_none() || self.since_noise + 1 >= NOISE_INTERVAL;
-        self.since_noise = if due { 0 } else { self.since_noise + 1 };
-        if !due {
-            return;
-        }
-        let Some(sigma) = depth_noise_with(&frame.depth, &frame.hand.mask, &mut self.residuals)
-        else {
+        let sigma = self.noise.sigma();
+        let gate = self.config.tracker.ray_gate_for(sigma);
+        self.ctx.tracking.set_ray_gate(gate);
+        let Some(sigma) = sigma.filter(|_| self.config.noise_scaled_prior) else {
             return;
         };
-        let smoothed = match self.noise {
-            Some(old) => old + NOISE_SMOOTHING * (sigma - old),
-            None => sigma,
-        };
-        self.noise = Some(smoothed);
-        let scale = noise_scale(smoothed);
+        let scale = noise_scale(sigma);
         self.problem.prior.set_noise_scale(scale);
         // The pose prior's pull on β: bias on exact data, regularization on noisy data.
         let share = self

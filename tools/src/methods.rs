@@ -64,9 +64,9 @@ pub struct TrackSettings {
     pub disabled: Vec<&'static str>,
     /// Sphere-mesh E_m2d mode: `render` or `centers`.
     pub m2d: Option<String>,
-    /// Sphere-mesh along-ray correspondences within this distance (mm,
-    /// `hmodel_spheremesh::TrackerConfig::ray_gate`).
-    pub ray_gate: Option<f64>,
+    /// Sphere-mesh along-ray correspondences: a distance (mm) on every frame or `off`
+    /// (`hmodel_spheremesh::TrackerConfig::ray_gate`); `None`: the config's.
+    pub ray_gate: Option<String>,
     /// The online calibration's estimator (method `online`; default: the config's, IEKF).
     pub estimator: Option<Estimator>,
 }
@@ -423,16 +423,28 @@ impl Method for SphereMesh {
     }
 }
 
-/// The along-ray gate: `--ray-gate` if given, else the config's; either must be a positive
-/// distance in mm (the tracker would silently ignore another).
-fn ray_gate(gate: Option<f64>, current: Option<f64>) -> Result<Option<f64>> {
-    match gate.or(current) {
+/// Applies `--ray-gate` to `cfg`: `off`, or a distance in mm used on every frame; without it
+/// the config's. Either must be a positive distance (the tracker would silently ignore
+/// another).
+fn apply_ray_gate(arg: Option<&str>, cfg: &mut hmodel_spheremesh::TrackerConfig) -> Result<()> {
+    match arg {
+        Some("off") => cfg.ray_gate = None,
+        Some(text) => {
+            let g: f64 = text
+                .parse()
+                .map_err(|_| anyhow::anyhow!("--ray-gate `{text}`: use a distance in mm or off"))?;
+            cfg.ray_gate = Some(g);
+            cfg.ray_gate_noise = 0.0;
+        }
+        None => {}
+    }
+    match cfg.ray_gate {
         Some(g) if !(g.is_finite() && g > 0.0) => {
             bail!(
                 "--ray-gate (or the config's ray_gate) must be a positive distance in mm, got {g}"
             )
         }
-        g => Ok(g),
+        _ => Ok(()),
     }
 }
 
@@ -459,7 +471,7 @@ impl MethodModel for SphereMeshMethodModel {
         if let Some(m) = &s.m2d {
             cfg.m2d_mode = m2d_mode(m)?;
         }
-        cfg.ray_gate = ray_gate(s.ray_gate, cfg.ray_gate)?;
+        apply_ray_gate(s.ray_gate.as_deref(), &mut cfg)?;
         apply_switches!(cfg, s, [d2m, m2d]);
         Ok(Box::new(SphereMeshTracker::new(&self.0, cfg, prior)?))
     }
@@ -519,7 +531,7 @@ impl MethodModel for OnlineMethodModel {
         if let Some(m) = &s.m2d {
             tc.m2d_mode = m2d_mode(m)?;
         }
-        tc.ray_gate = ray_gate(s.ray_gate, tc.ray_gate)?;
+        apply_ray_gate(s.ray_gate.as_deref(), tc)?;
         apply_switches!(tc, s, [d2m, m2d]);
         Ok(Box::new(OnlineTracker::new(
             &self.template,

@@ -100,10 +100,12 @@ pub struct TrackArgs {
     #[arg(long)]
     pub m2d: Option<String>,
     /// Sphere-mesh: register each point where its camera ray enters the model when that is
-    /// within this many mm of it (point-to-plane, unbiased under depth noise), else at its
-    /// closest point; e.g. `--ray-gate 20`. Default: the thesis' closest points everywhere.
-    #[arg(long, value_name = "MM")]
-    pub ray_gate: Option<f64>,
+    /// within this many mm of it and its closest point (point-to-plane, unbiased under depth
+    /// noise), else at its closest point: `--ray-gate 20` on every frame, `--ray-gate off` for
+    /// the thesis' closest points everywhere. Default: 20 mm on frames whose measured depth
+    /// noise is at least 1.5 mm (the config's `ray_gate`, `ray_gate_noise`).
+    #[arg(long, value_name = "MM|off")]
+    pub ray_gate: Option<String>,
     /// Disable the collision term (Eq. 2.7).
     #[arg(long)]
     pub no_collision: bool,
@@ -172,7 +174,7 @@ fn settings(args: &TrackArgs, method: &dyn Method) -> Result<TrackSettings> {
         rigid_first: !args.no_rigid_first,
         disabled,
         m2d: args.m2d.clone(),
-        ray_gate: args.ray_gate,
+        ray_gate: args.ray_gate.clone(),
         estimator: args.calibrate,
     })
 }

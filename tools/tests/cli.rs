@@ -623,6 +623,10 @@ fn track_rejects_switches_of_the_other_model() {
             ["--ray-gate", "positive"],
         ),
         (
+            vec!["--model", "spheremesh", "--ray-gate", "bogus"],
+            ["--ray-gate `bogus`", "off"],
+        ),
+        (
             vec!["--model", "spheremesh", "--template", "missing.json"],
             ["missing.json", "template"],
         ),

@@ -79,6 +79,31 @@ impl PixelRuns {
         self.row_start.push(self.runs.len() as u32);
     }
 
+    /// Makes the set the given pixels `v·width + u` of a `width × height` image, listed in
+    /// increasing order (repeats allowed; pixels beyond the image are dropped): the same set as
+    /// [`PixelRuns::set`] with their membership test, without visiting the other pixels.
+    pub fn set_sorted(&mut self, width: u32, height: u32, pixels: impl IntoIterator<Item = u32>) {
+        self.width = width;
+        self.row_start.clear();
+        self.runs.clear();
+        let w = width.max(1);
+        let end = u64::from(width) * u64::from(height);
+        for k in pixels.into_iter().take_while(|&k| u64::from(k) < end) {
+            let (u, v) = (k % w, k / w);
+            while self.row_start.len() <= v as usize {
+                self.row_start.push(self.runs.len() as u32);
+            }
+            let in_row = self.runs.len() > self.row_start[v as usize] as usize;
+            match self.runs.last_mut() {
+                Some(last) if in_row && last[1] + 1 >= u => last[1] = last[1].max(u),
+                _ => self.runs.push([u, u]),
+            }
+        }
+        while self.row_start.len() <= height as usize {
+            self.row_start.push(self.runs.len() as u32);
+        }
+    }
+
     /// The runs of row `v` (none beyond the image).
     fn row(&self, v: usize) -> &[[u32; 2]] {
         match (self.row_start.get(v), self.row_start.get(v + 1)) {
@@ -138,6 +163,14 @@ mod tests {
         for k in 0..(w * h) as usize + 40 {
             assert_eq!((&runs).keeps(k), k < (w * h) as usize && keep(k), "{k}");
         }
+        let listed: Vec<u32> = (0..(w * h) as usize + 40)
+            .filter(|&k| k < (w * h) as usize && keep(k))
+            .flat_map(|k| [k as u32, k as u32])
+            .chain([w * h + 3])
+            .collect();
+        let mut sorted = PixelRuns::default();
+        sorted.set_sorted(w, h, listed);
+        assert_eq!(sorted, runs, "the sorted list builds the same runs");
         for v in 0..h + 2 {
             for (u0, u1) in [(0, w - 1), (3, 3), (5, 30), (36, 36), (20, 10)] {
                 let (mut a, mut b) = (Vec::new(), Vec::new());

@@ -54,6 +54,47 @@ pub fn depth_noise_with(depth: &DepthImage, mask: &Mask, diffs: &mut Vec<f64>) -
     Some(*median * 1.4826 / 1.5f64.sqrt())
 }
 
+/// The depth noise of a sequence as a tracker follows it: [`depth_noise`] measured on the first
+/// frame that has enough pixels and on every [`NoiseMonitor::INTERVAL`]-th frame after, smoothed
+/// exponentially (weight [`NoiseMonitor::SMOOTHING`] per new measurement) so that one odd frame
+/// does not flip what the noise decides. Allocation-free once its scratch has held a frame.
+#[derive(Clone, Debug, Default)]
+pub struct NoiseMonitor {
+    sigma: Option<f64>,
+    since: usize,
+    diffs: Vec<f64>,
+}
+
+impl NoiseMonitor {
+    /// Frames between two measurements.
+    pub const INTERVAL: usize = 15;
+    /// Weight of a new measurement in the smoothed σ̂.
+    pub const SMOOTHING: f64 = 0.3;
+
+    /// Count one frame (`depth` with the hand's `mask`) and measure it when due; true when σ̂
+    /// changed.
+    pub fn observe(&mut self, depth: &DepthImage, mask: &Mask) -> bool {
+        let due = self.sigma.is_none() || self.since + 1 >= Self::INTERVAL;
+        self.since = if due { 0 } else { self.since + 1 };
+        if !due {
+            return false;
+        }
+        let Some(sigma) = depth_noise_with(depth, mask, &mut self.diffs) else {
+            return false;
+        };
+        self.sigma = Some(match self.sigma {
+            Some(old) => old + Self::SMOOTHING * (sigma - old),
+            None => sigma,
+        });
+        true
+    }
+
+    /// The smoothed depth noise σ̂ (mm), `None` before the first measurement.
+    pub fn sigma(&self) -> Option<f64> {
+        self.sigma
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -112,5 +153,31 @@ mod tests {
         let (d, mut m) = plane(3.0, 1);
         m.data.fill(0);
         assert_eq!(depth_noise(&d, &m), None);
+    }
+
+    /// The monitor measures the first frame with a hand, then every `INTERVAL`-th, and follows
+    /// a change of noise smoothly.
+    #[test]
+    fn the_monitor_measures_at_intervals_and_smooths() {
+        let (empty, mut none) = plane(3.0, 1);
+        none.data.fill(0);
+        let mut monitor = NoiseMonitor::default();
+        assert!(!monitor.observe(&empty, &none), "nothing to measure");
+        assert_eq!(monitor.sigma(), None);
+        let (d3, m3) = plane(3.0, 2);
+        assert!(monitor.observe(&d3, &m3), "the first frame with a hand");
+        let first = monitor.sigma().unwrap();
+        assert!((first - 3.0).abs() < 0.4, "{first}");
+        let (d8, m8) = plane(8.0, 4);
+        let changed: Vec<usize> = (1..=2 * NoiseMonitor::INTERVAL)
+            .filter(|_| monitor.observe(&d8, &m8))
+            .collect();
+        assert_eq!(
+            changed,
+            [NoiseMonitor::INTERVAL, 2 * NoiseMonitor::INTERVAL]
+        );
+        let s = monitor.sigma().unwrap();
+        let expected = first + (1.0 - (1.0 - NoiseMonitor::SMOOTHING).powi(2)) * (8.0 - first);
+        assert!((s - expected).abs() < 0.5, "{s} vs {expected}");
     }
 }
