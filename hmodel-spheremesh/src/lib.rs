@@ -35,23 +35,35 @@
 //! - Collisions: finger pills only, rest-pose overlaps tolerated, hmodel's under-relaxation
 //!   `fraction` left out (it makes the rows inconsistent with the energy; LM damping limits the
 //!   step instead).
-//! - Beyond the thesis, off by default: along-ray correspondences
-//!   ([`TrackerConfig::ray_gate`], `hands track --ray-gate 20`). A depth sensor's noise moves a
-//!   point along its camera ray, so a point whose ray enters the model within the gate is
-//!   registered at that entry, point-to-plane (the residual is then linear in the noise and
-//!   zero-mean at the true model); the closest point of a noisy point is biased outward on
-//!   curved parts (≈ σ² sin²φ / 2r on a cylinder of radius r at viewing angle φ) and the
-//!   front-facing rule pulls the points behind a silhouette inward. Measured
-//!   (`eval/tests/ch3_acceptance.rs`, teaser, 200 frames, true template, mean keypoint error):
-//!   ToF 1.512 → 0.864 mm (0.57×), structured light 0.325 → 0.316 mm, noise-free 0.178 →
-//!   0.174 mm; on `eval::online`'s calibration motion (300 frames, ToF, subjects 7 / 8, last
-//!   third) 2.56 → 1.81 and 2.20 → 1.62 mm. Requiring the entry on the closest point's
-//!   element (a guard against misassociation) lost most of the gain (2.09 / 1.99 mm): mixing
-//!   the two rules at the elements' junctions biases again. Its cost is why it is not the
-//!   default: one ray per point and iteration against the prepared elements
-//!   ([`hand_model::render::raycast::cast_ray_prepared`], seeded with the point's nearest
-//!   element) made the online bench's correspondences ≈ 4× slower (per-frame minima 4.1 →
-//!   17.9 ms, load ≈ 2), against the ≥ 200 frames/s goal of the online calibrator.
+//! - Beyond the thesis, on noisy data: along-ray correspondences ([`TrackerConfig::ray_gate`],
+//!   `hands track --ray-gate 20|off`). A depth sensor's noise moves a point along its camera
+//!   ray, so a point whose ray enters the model within the gate (20 mm) is registered at that
+//!   entry, point-to-plane (the residual is then linear in the noise and zero-mean at the true
+//!   model); the closest point of a noisy point is biased outward on curved parts (≈ σ² sin²φ /
+//!   2r on a cylinder of radius r at viewing angle φ) and the front-facing rule pulls the
+//!   points behind a silhouette inward. Measured on every frame
+//!   (`eval/tests/ch3_acceptance.rs`, teaser, 200 frames, true template, mean keypoint error,
+//!   before the slide limit below): ToF 1.512 → 0.864 mm (0.57×), structured light 0.325 →
+//!   0.316 mm, noise-free 0.178 → 0.174 mm.
+//!   - The entry must lie within 5 mm of the point's closest point
+//!     ([`TrackerConfig::ray_slide`]): a ray that first enters another part of the model (a
+//!     finger the pose put in front of the palm's points) otherwise pulls that part onto data
+//!     of the one behind it. Without the limit, `hands track` from the default template lost
+//!     the hand on a structured-light `occlusion` sequence (mean keypoint error 7.9 → 18.1 mm,
+//!     with online calibration 1.8 → 15.5 mm); with it 7.9 / 1.8 mm. Requiring the entry on the
+//!     closest point's element instead lost most of the gain (mixing the two rules at the
+//!     elements' junctions biases again).
+//!   - They run on the frames whose measured depth noise ([`sensor_io::preprocess::NoiseMonitor`])
+//!     is at least 1.5 mm ([`TrackerConfig::ray_gate_noise`]): on exact or quantized depth
+//!     they change nothing measurable and cost about four times the closest points'
+//!     correspondence time. The pixels of the frame's points are rendered once per iteration
+//!     ([`hand_model::render::DepthRenderer::render_hits`], per-element footprints) rather than
+//!     cast one ray per point against all elements: 1.1 against 2.1 ms per context update for
+//!     2045 points (the closest points alone: 0.3 ms).
+//!   - Measured from the default template with `hands track` (240 frames, subject 21, mean
+//!     keypoint error, thesis' rule → default): ToF teaser 3.80 → 3.70 mm (online calibration
+//!     2.72 → 1.75), ToF fist 3.91 → 3.77 (3.07 → 2.45), ToF `rotation_fast` 5.74 → 5.40 (4.57
+//!     → 4.08); noise-free and structured-light sequences unchanged (the gate stays off).
 //! - Priors: τ_pose = 1e4 on the project's PCA prior, joint limits 1e7, htrack's temporal
 //!   weights (3, 3; hmodel used 0.05) and uniform damping λ = 100 (shared with Ch. 2).
 //!

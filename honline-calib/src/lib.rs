@@ -99,17 +99,22 @@
 //!   them 0.77 mm). Registering points inside the model along the camera ray (point-to-plane on
 //!   the ray's entry, unbiased for depth noise) instead of the front-facing rule did not help
 //!   (`pinky_base_y` −4.0 mm, the radii then ≈ 2.5 mm thick; not kept).
-//! - Along-ray correspondences (`tracker.ray_gate`, beyond the thesis, off by default for
-//!   their cost; see `hmodel_spheremesh`'s docs) remove the correspondences' own noise bias.
-//!   Measured with a 20 mm gate (300 frames, last-third keypoints, default template start):
-//!   ToF subjects 7 / 8 3.36 / 2.84 → 3.19 / 2.07 mm (E_β 0.72 / 0.98 → 1.00 / 0.49 mm),
-//!   noise-free subject 7 0.71 → 0.67 mm. The same gate makes the Ch. 3 tracker on the true
-//!   template far better under ToF (2.56 / 2.20 → 1.81 / 1.62 mm), so against that reference
-//!   the ratio grows (1.76 / 1.28); started at the truth, the finger bases' `base_y` still
-//!   drift by −2.7 / +2.2 / −3.2 mm (index / middle / pinky, 150 frames) with or without m2d,
-//!   collisions or the pose prior — the ToF drift is not the correspondences'. Without the
-//!   PCA pose prior the online tracker reached 2.21 mm (subject 7, from the truth), below the
-//!   true template's 2.57 with it: on this motion under ToF the prior costs more than β.
+//! - Along-ray correspondences (`tracker.ray_gate`, beyond the thesis; see
+//!   `hmodel_spheremesh`'s docs) remove the correspondences' own noise bias. Unlimited, they
+//!   helped little here (20 mm gate, 300 frames, last-third keypoints, default template start:
+//!   ToF subjects 7 / 8 3.36 / 2.84 → 3.19 / 2.07 mm, E_β 0.72 / 0.98 → 1.00 / 0.49 mm) while
+//!   the Ch. 3 tracker on the true template gained far more (2.56 / 2.20 → 1.81 / 1.62 mm),
+//!   and they lost the hand where the fingers overlap (see there). Since session 16 the entry
+//!   must lie within 5 mm of the closest point and they run on the frames whose measured depth
+//!   noise is ≥ 1.5 mm (the calibrator measures it anyway, [`OnlineCalibrator::depth_noise`]),
+//!   in the reference tracker and here alike. Measured (ToF, last-third keypoint error over
+//!   the true template's; before → after): at 10 s subjects 7 / 8 / 9 **1.34 / 1.20 / 1.24 →
+//!   1.36 / 1.06 / 1.05** (online 3.42 → 2.81 mm on subject 7, its reference 2.56 → 2.06 mm),
+//!   E_β at the end 0.90 / 0.98 / 0.92 → 0.45 / 0.39 / 0.46 mm; subjects 10 / 11 / 12 1.42 /
+//!   1.19 / 1.40 (E_β 0.41–0.46 mm); at 20 s subjects 7 / 10 / 12 1.41 / 1.31 / 1.26. What
+//!   remains is a trade between a finger's consecutive phalanx lengths (subject 7: thumb
+//!   proximal +1.8 mm, middle −1.6 mm; pinky proximal +1.5 mm) that noisy frames do not
+//!   resolve. Noise-free and structured-light data are unchanged (σ̂ < 1.5 mm).
 //! - Still, online calibration beats none: the same tracker on the default template tracks
 //!   subjects 7 / 8 / 9 at 7.3 / 11.1 / 20.5× the true template's error noise-free and
 //!   1.48 / 1.75 / 3.76× under ToF (subject 7 guarded in `tracking_with_online_calibration_*`;
