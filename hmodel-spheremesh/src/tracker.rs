@@ -22,7 +22,9 @@ use sensor_io::preprocess::{NoiseMonitor, PreprocessedFrame};
 use sensor_io::record::HandRecord;
 use serde::{Deserialize, Serialize};
 
-use crate::context::{CorrespondenceCallback, M2dMode, TrackingCtx, DEFAULT_RAY_SLIDE};
+use crate::context::{
+    gate_for_noise, CorrespondenceCallback, M2dMode, TrackingCtx, DEFAULT_RAY_SLIDE,
+};
 use crate::terms::{Collision, CollisionParams, D2m, D2mParams, M2d, M2dParams};
 
 /// Which terms of Eq. 3.3 take part (the `--no-<term>` switches of `hands track`).
@@ -161,8 +163,7 @@ impl TrackerConfig {
     /// The along-ray gate for data of measured depth noise `sigma` (mm; `None`: not measured
     /// yet): [`Self::ray_gate`] when [`Self::ray_gate_noise`] admits it.
     pub fn ray_gate_for(&self, sigma: Option<f64>) -> Option<f64> {
-        let noisy = self.ray_gate_noise <= 0.0 || sigma.is_some_and(|s| s >= self.ray_gate_noise);
-        self.ray_gate.filter(|_| noisy)
+        gate_for_noise(self.ray_gate, self.ray_gate_noise, sigma)
     }
 }
 

@@ -24,7 +24,7 @@ use serde::{Deserialize, Serialize};
 
 use super::rows::{DataWeights, Row, RowLayout, ShapeRows};
 use super::shape::{ShapeSpace, ShapeState};
-use crate::context::TrackingCtx;
+use crate::context::{gate_for_noise, TrackingCtx};
 use crate::jacobian::{FootpointJacobian, MAX_ELEMENT_DOFS};
 
 /// What a calibration frame holds.
@@ -216,6 +216,13 @@ pub struct CalibrationConfig {
     /// the scaled τ_m2d); noise-free
     /// results are unchanged (σ̂ < 1 mm).
     pub noise_scaled_priors: bool,
+    /// Along-ray correspondences of depth frames within this distance (mm) of the ray's entry
+    /// (as the tracker's, [`crate::TrackerConfig::ray_gate`]) on the frames whose measured
+    /// noise is at least [`Self::ray_gate_noise`]; `None`: closest points everywhere.
+    pub ray_gate: Option<f64>,
+    /// The measured depth noise (mm) from which a depth frame's points register along their
+    /// rays; 0: every depth frame.
+    pub ray_gate_noise: f64,
     /// Radius bounds (mm) of every sphere.
     pub radius_limits: [f64; 2],
     /// Weight of the radius bounds and of the joint limits of every `θ_n`.
@@ -245,6 +252,8 @@ impl Default for CalibrationConfig {
             prior_beta: 1e-2,
             prior_free: 10.0,
             noise_scaled_priors: true,
+            ray_gate: Some(20.0),
+            ray_gate_noise: 1.5,
             radius_limits: [1.5, 30.0],
             limits: 1e5,
             lambda: 1e-3,
@@ -477,6 +486,14 @@ impl Problem<'_> {
             ctx.set_points(&frame.points);
             *ctx.sensor_mut() = frame.sensor.clone();
             ctx.set_front_facing(frame.kind == FrameKind::Depth);
+            if frame.kind == FrameKind::Depth {
+                let gate = self.config.ray_gate;
+                ctx.set_ray_gate(gate_for_noise(
+                    gate,
+                    self.config.ray_gate_noise,
+                    frame.noise,
+                ));
+            }
             ctx.set_m2d((frame.kind == FrameKind::Depth).then_some(crate::M2dMode::Render));
             if ctx.update(pose, false).is_err() {
                 return Err(CalibrationError::Input(format!(
