@@ -43,8 +43,8 @@
 //!   2r on a cylinder of radius r at viewing angle φ) and the front-facing rule pulls the
 //!   points behind a silhouette inward. Measured on every frame
 //!   (`eval/tests/ch3_acceptance.rs`, teaser, 200 frames, true template, mean keypoint error,
-//!   before the slide limit below): ToF 1.512 → 0.864 mm (0.57×), structured light 0.325 →
-//!   0.316 mm, noise-free 0.178 → 0.174 mm.
+//!   closest points → along rays): ToF 1.512 → 0.995 mm (0.66×; 0.864 without the slide limit
+//!   below), structured light 0.325 → 0.321 mm, noise-free 0.178 → 0.183 mm.
 //!   - The entry must lie within 5 mm of the point's closest point
 //!     ([`TrackerConfig::ray_slide`]): a ray that first enters another part of the model (a
 //!     finger the pose put in front of the palm's points) otherwise pulls that part onto data
@@ -55,8 +55,8 @@
 //!     elements' junctions biases again).
 //!   - They run on the frames whose measured depth noise ([`sensor_io::preprocess::NoiseMonitor`])
 //!     is at least 1.5 mm ([`TrackerConfig::ray_gate_noise`]): on exact or quantized depth
-//!     they change nothing measurable and cost about four times the closest points'
-//!     correspondence time. The pixels of the frame's points are rendered once per iteration
+//!     they gain nothing (0.178 → 0.183 mm above) and cost about four times the closest
+//!     points' correspondence time. The pixels of the frame's points are rendered once per iteration
 //!     ([`hand_model::render::DepthRenderer::render_hits`], per-element footprints) rather than
 //!     cast one ray per point against all elements: 1.1 against 2.1 ms per context update for
 //!     2045 points (the closest points alone: 0.3 ms).
