@@ -118,7 +118,8 @@
 //! - Still, online calibration beats none: the same tracker on the default template tracks
 //!   subjects 7 / 8 / 9 at 7.3 / 11.1 / 20.5× the true template's error noise-free and
 //!   1.48 / 1.75 / 3.76× under ToF (subject 7 guarded in `tracking_with_online_calibration_*`;
-//!   8 / 9 measured with β frozen at the template).
+//!   8 / 9 measured with β frozen at the template; with the along-ray correspondences the
+//!   true template tracks better, and subject 7's default template is at 1.68×).
 //! - Not yet here: loss detection and re-initialization (the first pose comes from
 //!   [`OnlineCalibrator::set_pose`] or the PCA mean placed on the points).
 //! - The collision term (Ch. 3) tolerates the overlap the model's pills have at the rest pose;
