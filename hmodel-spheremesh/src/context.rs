@@ -480,14 +480,20 @@ impl<'m> TrackingCtx<'m> {
             return false;
         }
         // Both lists are in pixel order.
-        let mut points = self.ray_pixels.iter().peekable();
-        for hit in &self.ray_hits {
-            while points.next_if(|&&(k, _)| k < hit.pixel).is_some() {}
-            while let Some(&(_, i)) = points.next_if(|&&(k, _)| k == hit.pixel) {
-                let p = &self.points[i as usize];
-                if p.cross(&hit.point).norm() > 1e-9 * p.norm() * hit.point.norm() {
-                    self.ray_cast.push(i);
-                } else if self.correspondences[i as usize].is_some() {
+        let (w, fx, fy, cx, cy) = (camera.width, camera.fx, camera.fy, camera.cx, camera.cy);
+        let mut hits = self.ray_hits.iter().peekable();
+        for &(k, i) in &self.ray_pixels {
+            while hits.next_if(|h| h.pixel < k).is_some() {}
+            let p = &self.points[i as usize];
+            let dir = Vector3::new(
+                (f64::from(k % w) - cx) / fx,
+                (f64::from(k / w) - cy) / fy,
+                1.0,
+            );
+            if p.cross(&dir).norm() > 1e-9 * p.norm() * dir.norm() {
+                self.ray_cast.push(i);
+            } else if let Some(hit) = hits.peek().filter(|h| h.pixel == k) {
+                if self.correspondences[i as usize].is_some() {
                     self.ray_entries.push((i, hit.element, hit.point));
                 }
             }
