@@ -114,13 +114,6 @@ pub struct TrackingCtx<'m> {
     pushes: Vec<SilhouettePush>,
 }
 
-/// `gate` when the measured depth noise `sigma` (mm; `None`: not measured) is at least
-/// `min_noise` (≤ 0: always), else `None` (the along-ray correspondences' switch).
-pub(crate) fn gate_for_noise(gate: Option<f64>, min_noise: f64, sigma: Option<f64>) -> Option<f64> {
-    let noisy = min_noise <= 0.0 || sigma.is_some_and(|s| s >= min_noise);
-    gate.filter(|_| noisy)
-}
-
 /// The default of [`TrackingCtx::set_ray_slide`] (mm).
 pub const DEFAULT_RAY_SLIDE: f64 = 5.0;
 

@@ -18,12 +18,12 @@ use hand_model::solver::{
 };
 use hand_model::spheremesh::{PosedSphereMesh, SphereMeshTemplate};
 use nalgebra::{Vector2, Vector3};
-use sensor_io::preprocess::{NoiseMonitor, PreprocessedFrame};
+use sensor_io::preprocess::{gate_for_noise, NoiseMonitor, PreprocessedFrame};
 use sensor_io::record::HandRecord;
 use serde::{Deserialize, Serialize};
 
 use crate::context::{
-    gate_for_noise, CorrespondenceCallback, M2dMode, TrackingCtx, DEFAULT_RAY_SLIDE,
+    CorrespondenceCallback, M2dMode, TrackingCtx, DEFAULT_RAY_SLIDE,
 };
 use crate::terms::{Collision, CollisionParams, D2m, D2mParams, M2d, M2dParams};
 

@@ -3,8 +3,16 @@
 //! correspondences") with one IRLS weight each (§2.7.4 "Point cloud alignment"), and the
 //! rendered silhouette `S_r` of the model with its per-pixel bone and 3D point (§2.3.1 "2D
 //! correspondences", Eq. 2.3).
+//!
+//! Beyond the thesis, under depth noise the points can register where their camera rays enter
+//! the model ([`TrackingCtx::set_ray_gate`]), as the sphere-mesh tracker's do: a closest point
+//! is biased outward under noise along the rays (a noisy point in front of a cylinder finds its
+//! foot point on the cylinder's side, one behind it deep in its silhouette), the ray's entry is
+//! not. The entries come from the same rendering as `S_r`, extended to the points' pixels.
 
-use hand_model::cylinder::{CylinderModel, CylinderProjection, CylinderRaster, View, NO_SEED};
+use hand_model::cylinder::{
+    cast_camera_ray, CylinderModel, CylinderProjection, CylinderRaster, RasterHit, View, NO_SEED,
+};
 use hand_model::kinematics::{Pose, PosedSkeleton, Skeleton};
 use hand_model::render::Intrinsics;
 use hand_model::solver::{IrlsParams, IterInfo, LmCallback, PoseContext, TermError};
@@ -46,7 +54,18 @@ pub struct TrackingCtx<'m> {
     sensor: SensorView,
     silhouette: bool,
     raster: CylinderRaster,
+    /// Along-ray correspondences: the largest distance from a point to its ray's entry.
+    ray_gate: Option<f64>,
+    /// The largest distance from the entry to the closest point it replaces.
+    ray_slide: f64,
+    /// Per point its linear pixel index in the sensor image (empty when the frame names none).
+    pixels: Vec<u32>,
+    /// Per pixel of the sensor image whether a point names it (the rendering's extra pixels).
+    point_pixels: Vec<bool>,
 }
+
+/// The default of [`TrackingCtx::set_ray_slide`] (mm), the sphere-mesh tracker's.
+pub const DEFAULT_RAY_SLIDE: f64 = 5.0;
 
 impl<'m> TrackingCtx<'m> {
     /// A context at the rest pose with no points; `view` is the camera model of the
@@ -70,7 +89,37 @@ impl<'m> TrackingCtx<'m> {
             sensor: SensorView::default(),
             silhouette: true,
             raster: CylinderRaster::new(),
+            ray_gate: None,
+            ray_slide: DEFAULT_RAY_SLIDE,
+            pixels: Vec::new(),
+            point_pixels: Vec::new(),
         }
+    }
+
+    /// Along-ray correspondences (off by default, the thesis' front-facing closest points): a
+    /// point whose camera ray enters the model within `gate` mm of it, and within
+    /// [`TrackingCtx::set_ray_slide`] of its closest point, registers at that entry,
+    /// point-to-plane with the surface normal there — zero-mean under depth noise along the rays,
+    /// where the closest point is biased. `None`, or a gate that is not positive and finite, turns
+    /// them off.
+    pub fn set_ray_gate(&mut self, gate: Option<f64>) {
+        self.ray_gate = gate.filter(|g| g.is_finite() && *g > 0.0);
+    }
+
+    /// The along-ray gate in force.
+    pub fn ray_gate(&self) -> Option<f64> {
+        self.ray_gate
+    }
+
+    /// How far (mm) an along-ray entry may lie from the closest point it replaces: where the pose
+    /// puts one part in front of another's data, the rays enter the wrong part first; the closest
+    /// point keeps those points. Not a number: [`DEFAULT_RAY_SLIDE`].
+    pub fn set_ray_slide(&mut self, slide: f64) {
+        self.ray_slide = if slide.is_nan() {
+            DEFAULT_RAY_SLIDE
+        } else {
+            slide.max(0.0)
+        };
     }
 
     /// Enable or disable the rendering of the silhouette `S_r` in [`TrackingCtx::update`] (on by
@@ -96,10 +145,21 @@ impl<'m> TrackingCtx<'m> {
     }
 
     /// Take the sensor data of a preprocessed frame: its points `𝒳_s` ([`TrackingCtx::set_points`]),
-    /// camera, silhouette distance transform and wristband ([`SensorView`]). Reuses the buffers.
+    /// their pixels, camera, silhouette distance transform and wristband ([`SensorView`]).
+    /// Reuses the buffers.
     pub fn set_frame(&mut self, frame: &PreprocessedFrame) {
         self.set_points(&frame.points);
         self.sensor.set_frame(frame);
+        if let Some(c) = frame.camera.as_ref() {
+            let n = c.width as usize * c.height as usize;
+            if frame.pixels.len() == frame.points.len() && frame.pixels.iter().all(|&k| (k as usize) < n) {
+                self.point_pixels.resize(n, false);
+                for &k in &frame.pixels {
+                    self.point_pixels[k as usize] = true;
+                }
+                self.pixels.extend_from_slice(&frame.pixels);
+            }
+        }
     }
 
     /// The sensor data of the image-space terms.
@@ -115,6 +175,10 @@ impl<'m> TrackingCtx<'m> {
     /// Replace the sensor points `𝒳_s` (camera frame, mm); keeps the buffers' capacity. The
     /// correspondences are stale until the next [`TrackingCtx::update`].
     pub fn set_points(&mut self, points: &[Vector3<f64>]) {
+        for &k in &self.pixels {
+            self.point_pixels[k as usize] = false;
+        }
+        self.pixels.clear();
         self.points.clear();
         self.points.extend_from_slice(points);
         self.correspondences.clear();
@@ -149,7 +213,8 @@ impl<'m> TrackingCtx<'m> {
             return Ok(());
         }
         self.posed.update(&self.model.skeleton, &self.pose);
-        match (&self.sensor.camera, self.silhouette) {
+        let along = self.ray_gate.is_some() && !self.pixels.is_empty();
+        match (&self.sensor.camera, self.silhouette || along) {
             (Some(c), true) => {
                 let intrinsics = Intrinsics {
                     fx: c.fx,
@@ -159,12 +224,17 @@ impl<'m> TrackingCtx<'m> {
                     width: c.width,
                     height: c.height,
                 };
-                // Only pixels outside S_s can carry an E2D push constraint.
-                let nearest = &self.sensor.nearest;
+                // Only pixels outside S_s can carry an E2D push constraint; the points' own
+                // pixels give their rays' entries.
+                let (nearest, silhouette) = (&self.sensor.nearest, self.silhouette);
                 let outside = |i: usize| nearest.get(i).is_none_or(|&n| n as usize != i);
+                let points = &self.point_pixels;
+                let keep = |i: usize| {
+                    (silhouette && outside(i)) || (along && points.get(i).copied().unwrap_or(false))
+                };
                 if self
                     .raster
-                    .render_where(self.model, &self.posed, &intrinsics, outside)
+                    .render_where(self.model, &self.posed, &intrinsics, keep)
                     .is_err()
                 {
                     return Err(TermError::Failed("invalid sensor camera"));
@@ -204,7 +274,61 @@ impl<'m> TrackingCtx<'m> {
                 None => (0.0, 0.0),
             };
         }
+        if let Some(gate) = self.ray_gate {
+            self.register_along_rays(gate);
+        }
         Ok(())
+    }
+
+    /// [`TrackingCtx::set_ray_gate`]'s correspondences over the closest points already found:
+    /// the entries of the points' pixels from the rendering, a cast of their own for points
+    /// without a rendered pixel or moved off its ray.
+    fn register_along_rays(&mut self, gate: f64) {
+        let rendered = !self.pixels.is_empty() && self.raster.width() > 0;
+        let camera = self.sensor.camera.as_ref();
+        for i in 0..self.points.len() {
+            let (x, Some(c)) = (self.points[i], self.correspondences[i]) else {
+                continue;
+            };
+            let pixel_entry = match (rendered, camera) {
+                (true, Some(cam)) => {
+                    let k = self.pixels[i];
+                    let (u, v) = (f64::from(k % cam.width), f64::from(k / cam.width));
+                    let dir = Vector3::new((u - cam.cx) / cam.fx, (v - cam.cy) / cam.fy, 1.0);
+                    let on_ray = x.cross(&dir).norm() <= 1e-9 * x.norm() * dir.norm();
+                    on_ray.then(|| self.raster.hit(k as usize))
+                }
+                _ => None,
+            };
+            let hit = match pixel_entry {
+                Some(hit) => hit,
+                None => cast_camera_ray(self.model, &self.posed, &x),
+            };
+            let Some(RasterHit { segment, point, .. }) = hit else {
+                continue;
+            };
+            if (point - x).norm() > gate || (point - c.point).norm() > self.ray_slide {
+                continue;
+            }
+            let seg = &self.model.segments[segment];
+            let Some(mut q) = self
+                .posed
+                .globals
+                .get(seg.bone)
+                .and_then(|g| seg.project_point(g, &point))
+            else {
+                continue;
+            };
+            q.segment = segment;
+            let res = q.normal.dot(&(q.point - x));
+            self.residuals[i] = res;
+            self.weights[i] = if self.reweighted {
+                self.irls.weight(res)
+            } else {
+                1.0
+            };
+            self.correspondences[i] = Some(q);
+        }
     }
 
     /// The cylinder model.

@@ -58,7 +58,7 @@ mod tests;
 #[cfg(test)]
 mod tests_e2d;
 
-pub use context::{CorrespondenceCallback, TrackingCtx};
+pub use context::{CorrespondenceCallback, TrackingCtx, DEFAULT_RAY_SLIDE};
 pub use hand_model::solver::IrlsParams;
 pub use hand_model::solver::{FrameStats, LossParams};
 pub use sensor_io::SensorView;

@@ -25,11 +25,11 @@ use hand_model::solver::{
     TrackingProblem,
 };
 use nalgebra::{Vector2, Vector3};
-use sensor_io::preprocess::PreprocessedFrame;
+use sensor_io::preprocess::{gate_for_noise, NoiseMonitor, PreprocessedFrame};
 use sensor_io::record::HandRecord;
 use serde::{Deserialize, Serialize};
 
-use crate::context::{CorrespondenceCallback, TrackingCtx};
+use crate::context::{CorrespondenceCallback, TrackingCtx, DEFAULT_RAY_SLIDE};
 use crate::terms::{
     Collision, CollisionParams, E2d, E2dParams, E3d, E3dParams, Wrist, WristParams,
 };
@@ -77,6 +77,17 @@ pub struct TrackerConfig {
     pub lm: LmOptions,
     /// Front-facing correspondences (§2.3.1) rather than plain closest points (Fig. 2.6).
     pub front_facing: bool,
+    /// Along-ray correspondences within this distance (mm) of the ray's entry into the model
+    /// ([`TrackingCtx::set_ray_gate`]) on the frames that [`Self::ray_gate_noise`] admits;
+    /// `None`: the thesis' correspondences everywhere.
+    pub ray_gate: Option<f64>,
+    /// The measured depth noise σ̂ (mm, [`NoiseMonitor`]) from which the along-ray
+    /// correspondences run; 0: on every frame. Exact and quantized depth (σ̂ < 1 mm) keep the
+    /// thesis' rule and its speed, as in the sphere-mesh tracker.
+    pub ray_gate_noise: f64,
+    /// How far an along-ray footpoint may lie from the closest point (mm,
+    /// [`TrackingCtx::set_ray_slide`]).
+    pub ray_slide: f64,
     /// ℓ1 by IRLS (§2.7.4).
     pub irls: IrlsParams,
     /// Which terms run.
@@ -109,6 +120,9 @@ impl Default for TrackerConfig {
                 ..LmOptions::default()
             },
             front_facing: true,
+            ray_gate: Some(20.0),
+            ray_gate_noise: 1.5,
+            ray_slide: DEFAULT_RAY_SLIDE,
             irls: IrlsParams::default(),
             enabled: EnabledTerms::default(),
             e3d: E3dParams::default(),
@@ -120,6 +134,14 @@ impl Default for TrackerConfig {
             temporal: TemporalParams::default(),
             loss: LossParams::default(),
         }
+    }
+}
+
+impl TrackerConfig {
+    /// The along-ray gate for data of measured depth noise `sigma` (mm; `None`: not measured
+    /// yet): [`Self::ray_gate`] when [`Self::ray_gate_noise`] admits it.
+    pub fn ray_gate_for(&self, sigma: Option<f64>) -> Option<f64> {
+        gate_for_noise(self.ray_gate, self.ray_gate_noise, sigma)
     }
 }
 
@@ -283,6 +305,7 @@ pub struct Tracker<'m> {
     problem: Problem<'m>,
     frames: FrameLoop,
     posed: PosedSkeleton,
+    noise: NoiseMonitor,
 }
 
 impl<'m> Tracker<'m> {
@@ -297,6 +320,8 @@ impl<'m> Tracker<'m> {
         let mut ctx = TrackingCtx::new(model, View::Orthographic, config.irls.clone());
         ctx.set_front_facing(config.front_facing);
         ctx.set_silhouette(config.enabled.e2d);
+        ctx.set_ray_gate(config.ray_gate_for(None));
+        ctx.set_ray_slide(config.ray_slide);
         let PriorSetup {
             prior: pose_prior,
             solver,
@@ -317,6 +342,7 @@ impl<'m> Tracker<'m> {
             model,
             frames: FrameLoop::new(mean_pose.clone(), config.loss.clone()),
             posed: PosedSkeleton::new(sk, &mean_pose),
+            noise: NoiseMonitor::default(),
             problem: Problem {
                 ctx,
                 solver,
@@ -373,6 +399,10 @@ impl<'m> Tracker<'m> {
         let n = frame.points.len();
         if n >= self.frames.loss().min_points.max(1) {
             self.problem.ctx.set_frame(frame);
+            if self.noise.observe(&frame.depth, &frame.hand.mask) {
+                let gate = self.config.ray_gate_for(self.noise.sigma());
+                self.problem.ctx.set_ray_gate(gate);
+            }
         }
         let outcome = self.frames.step(&mut self.problem, n);
         rec.flags = outcome.flags.iter().map(|f| f.to_string()).collect();

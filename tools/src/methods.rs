@@ -64,8 +64,8 @@ pub struct TrackSettings {
     pub disabled: Vec<&'static str>,
     /// Sphere-mesh E_m2d mode: `render` or `centers`.
     pub m2d: Option<String>,
-    /// Sphere-mesh along-ray correspondences: a distance (mm) on every frame or `off`
-    /// (`hmodel_spheremesh::TrackerConfig::ray_gate`); `None`: the config's.
+    /// Along-ray correspondences: a distance (mm) on every frame or `off` (the tracker config's
+    /// `ray_gate`, either tracker); `None`: the config's.
     pub ray_gate: Option<String>,
     /// The online calibration's estimator (method `online`; default: the config's, IEKF).
     pub estimator: Option<Estimator>,
@@ -387,6 +387,7 @@ impl MethodModel for CylinderMethodModel {
     ) -> Result<Box<dyn FrameTracker + 'a>> {
         let mut cfg: htrack_icp::TrackerConfig = read_config(s.config.as_deref())?;
         apply_switches!(cfg, s, [e3d, e2d, wrist]);
+        apply_ray_gate(s.ray_gate.as_deref(), &mut cfg.ray_gate, &mut cfg.ray_gate_noise)?;
         Ok(Box::new(CylinderTracker::new(&self.0, cfg, prior)?))
     }
 
@@ -426,19 +427,20 @@ impl Method for SphereMesh {
 /// Applies `--ray-gate` to `cfg`: `off`, or a distance in mm used on every frame; without it
 /// the config's. Either must be a positive distance (the tracker would silently ignore
 /// another).
-fn apply_ray_gate(arg: Option<&str>, cfg: &mut hmodel_spheremesh::TrackerConfig) -> Result<()> {
+/// `gate` and `min_noise` are the tracker config's `ray_gate` and `ray_gate_noise`.
+fn apply_ray_gate(arg: Option<&str>, gate: &mut Option<f64>, min_noise: &mut f64) -> Result<()> {
     match arg {
-        Some("off") => cfg.ray_gate = None,
+        Some("off") => *gate = None,
         Some(text) => {
             let g: f64 = text
                 .parse()
                 .map_err(|_| anyhow::anyhow!("--ray-gate `{text}`: use a distance in mm or off"))?;
-            cfg.ray_gate = Some(g);
-            cfg.ray_gate_noise = 0.0;
+            *gate = Some(g);
+            *min_noise = 0.0;
         }
         None => {}
     }
-    match cfg.ray_gate {
+    match *gate {
         Some(g) if !(g.is_finite() && g > 0.0) => {
             bail!(
                 "--ray-gate (or the config's ray_gate) must be a positive distance in mm, got {g}"
@@ -471,7 +473,7 @@ impl MethodModel for SphereMeshMethodModel {
         if let Some(m) = &s.m2d {
             cfg.m2d_mode = m2d_mode(m)?;
         }
-        apply_ray_gate(s.ray_gate.as_deref(), &mut cfg)?;
+        apply_ray_gate(s.ray_gate.as_deref(), &mut cfg.ray_gate, &mut cfg.ray_gate_noise)?;
         apply_switches!(cfg, s, [d2m, m2d]);
         Ok(Box::new(SphereMeshTracker::new(&self.0, cfg, prior)?))
     }
@@ -531,7 +533,7 @@ impl MethodModel for OnlineMethodModel {
         if let Some(m) = &s.m2d {
             tc.m2d_mode = m2d_mode(m)?;
         }
-        apply_ray_gate(s.ray_gate.as_deref(), tc)?;
+        apply_ray_gate(s.ray_gate.as_deref(), &mut tc.ray_gate, &mut tc.ray_gate_noise)?;
         apply_switches!(tc, s, [d2m, m2d]);
         Ok(Box::new(OnlineTracker::new(
             &self.template,

@@ -99,10 +99,10 @@ pub struct TrackArgs {
     /// model, §3.3.2) or `centers` (projected sphere centers, §3.6).
     #[arg(long)]
     pub m2d: Option<String>,
-    /// Sphere-mesh: register each point where its camera ray enters the model when that is
-    /// within this many mm of it and its closest point (point-to-plane, unbiased under depth
+    /// Register each point where its camera ray enters the model (either model) when that is
+    /// within this many mm of it and of its closest point (point-to-plane, unbiased under depth
     /// noise), else at its closest point: `--ray-gate 20` on every frame, `--ray-gate off` for
-    /// the thesis' closest points everywhere. Default: 20 mm on frames whose measured depth
+    /// the thesis' correspondences everywhere. Default: 20 mm on frames whose measured depth
     /// noise is at least 1.5 mm (the config's `ray_gate`, `ray_gate_noise`).
     #[arg(long, value_name = "MM|off")]
     pub ray_gate: Option<String>,
@@ -140,7 +140,6 @@ fn disabled_terms(args: &TrackArgs) -> Vec<(&'static str, &'static str)> {
         ("--no-d2m", "d2m", args.no_d2m),
         ("--no-m2d", "m2d", args.no_m2d),
         ("--m2d", "m2d", args.m2d.is_some()),
-        ("--ray-gate", "d2m", args.ray_gate.is_some()),
         ("--no-collision", "collision", args.no_collision),
         ("--no-pose-prior", "pose_prior", args.no_pose_prior),
         ("--no-joint-limits", "joint_limits", args.no_joint_limits),
@@ -164,7 +163,7 @@ fn settings(args: &TrackArgs, method: &dyn Method) -> Result<TrackSettings> {
                 method.terms().join(", ")
             );
         }
-        if flag != "--m2d" && flag != "--ray-gate" {
+        if flag != "--m2d" {
             disabled.push(term);
         }
     }

@@ -617,7 +617,7 @@ fn track_rejects_switches_of_the_other_model() {
             vec!["--model", "spheremesh", "--m2d", "bogus"],
             ["--m2d", "bogus"],
         ),
-        (vec!["--ray-gate", "20"], ["--ray-gate", "cylinders"]),
+        (vec!["--ray-gate", "0"], ["--ray-gate", "positive"]),
         (
             vec!["--model", "spheremesh", "--ray-gate", "0"],
             ["--ray-gate", "positive"],

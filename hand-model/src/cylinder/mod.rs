@@ -45,4 +45,4 @@ pub use calib::{load_htrack_calib, parse_htrack_calib, HTRACK_PALM_OFFSET, HTRAC
 pub use default::default_right_hand_cylinders;
 pub use model::{CylinderKeypoint, CylinderModel, Segment, CYLINDER_DOF_NAMES};
 pub use query::{CylinderPart, CylinderProjection, View, NO_SEED};
-pub use raster::{CylinderRaster, RasterHit, NO_SEGMENT};
+pub use raster::{cast_camera_ray, CylinderRaster, RasterHit, NO_SEGMENT};

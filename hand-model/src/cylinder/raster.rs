@@ -271,6 +271,38 @@ impl CylinderRaster {
     }
 }
 
+/// The first entry into the posed model of the camera ray through `through` (camera frame, in
+/// front of the camera), as [`CylinderRaster`] renders it at a pixel: every segment cast, the
+/// nearest kept. `None` when the ray misses or `through` is not strictly in front of the camera.
+/// The rasterizer answers the same for a whole image at once; this is for single points that
+/// lie off their pixel's ray.
+pub fn cast_camera_ray(
+    model: &CylinderModel,
+    posed: &PosedSkeleton,
+    through: &Vector3<f64>,
+) -> Option<RasterHit> {
+    if !(through.z > 0.0 && through.iter().all(|v| v.is_finite())) {
+        return None;
+    }
+    let dir = through / through.z;
+    let mut best: Option<RasterHit> = None;
+    for (si, seg) in model.segments.iter().enumerate() {
+        let g = posed.globals.get(seg.bone).filter(|g| g.is_finite())?;
+        let rt = g.rotation.transpose();
+        let max_z = best.map_or(f64::INFINITY, |b| b.point.z);
+        if let Some(z) = seg.cast_local_ray(&-(rt * g.translation), &(rt * dir), max_z) {
+            if z < max_z {
+                best = Some(RasterHit {
+                    segment: si,
+                    bone: seg.bone,
+                    point: dir * z,
+                });
+            }
+        }
+    }
+    best
+}
+
 /// The pixel rectangle (half-open, clamped at 0, one pixel of margin) that contains the
 /// projection of the sphere `(c, radius)`; `None` unless the sphere lies strictly in front of
 /// the camera (then the caller scans the whole image).
@@ -416,6 +448,38 @@ mod tests {
         assert!(both > 500);
         assert!(depth_diff <= 3 && mask_diff <= 3);
         assert!(worst < 1e-6);
+    }
+
+    /// The single-ray cast is the rasterizer's answer at every pixel (hit or miss): the same
+    /// segment and, up to rounding, the same point.
+    #[test]
+    fn single_ray_casts_match_the_raster() {
+        let model = default_right_hand_cylinders();
+        let posed = model.posed(&pose(&model)).unwrap();
+        let cam = camera();
+        let mut raster = CylinderRaster::new();
+        raster.render(&model, &posed, &cam).unwrap();
+        let mut hits = 0;
+        for v in 0..cam.height {
+            for u in 0..cam.width {
+                let dir = Vector3::new(
+                    (f64::from(u) - cam.cx) / cam.fx,
+                    (f64::from(v) - cam.cy) / cam.fy,
+                    1.0,
+                );
+                let cast = cast_camera_ray(&model, &posed, &(dir * 123.0));
+                let Some(h) = raster.hit_at(u, v) else {
+                    assert!(cast.is_none(), "({u}, {v}): {cast:?}");
+                    continue;
+                };
+                let c = cast.unwrap_or_else(|| panic!("({u}, {v}) missed"));
+                assert_eq!((c.segment, c.bone), (h.segment, h.bone), "({u}, {v})");
+                assert!((c.point - h.point).norm() < 1e-9, "({u}, {v})");
+                hits += 1;
+            }
+        }
+        assert!(hits > 2000, "{hits} hits");
+        assert!(cast_camera_ray(&model, &posed, &Vector3::new(0.0, 0.0, -1.0)).is_none());
     }
 
     #[test]

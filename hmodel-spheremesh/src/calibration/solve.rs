@@ -18,13 +18,13 @@ use hand_model::shape::Element;
 use hand_model::solver::{IrlsParams, NormalEquations};
 use hand_model::spheremesh::{PosedSphereMesh, SphereMeshTemplate};
 use nalgebra::{DMatrix, DVector, Vector3};
-use sensor_io::preprocess::{depth_noise, noise_scale, PreprocessedFrame};
+use sensor_io::preprocess::{depth_noise, gate_for_noise, noise_scale, PreprocessedFrame};
 use sensor_io::SensorView;
 use serde::{Deserialize, Serialize};
 
 use super::rows::{DataWeights, Row, RowLayout, ShapeRows};
 use super::shape::{ShapeSpace, ShapeState};
-use crate::context::{gate_for_noise, TrackingCtx};
+use crate::context::TrackingCtx;
 use crate::jacobian::{FootpointJacobian, MAX_ELEMENT_DOFS};
 
 /// What a calibration frame holds.

@@ -12,7 +12,7 @@ mod segment;
 mod subsample;
 
 pub use downsample::{clip_range, median_downsample};
-pub use noise::{depth_noise, depth_noise_with, noise_scale, NoiseMonitor};
+pub use noise::{depth_noise, depth_noise_with, gate_for_noise, noise_scale, NoiseMonitor};
 pub use normals::depth_normals;
 pub use pipeline::{PreprocessConfig, PreprocessedFrame, Preprocessor, Segmentation, Subsampling};
 pub use segment::{

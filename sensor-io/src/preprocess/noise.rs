@@ -24,6 +24,14 @@ pub fn noise_scale(sigma: f64) -> f64 {
     }
 }
 
+/// `gate` when the measured depth noise `sigma` (mm; `None`: not measured yet) is at least
+/// `min_noise` (≤ 0: always), else `None`: the switch of the trackers' along-ray
+/// correspondences, which pay off under noise and cost a rendering of the points' pixels.
+pub fn gate_for_noise(gate: Option<f64>, min_noise: f64, sigma: Option<f64>) -> Option<f64> {
+    let noisy = min_noise <= 0.0 || sigma.is_some_and(|s| s >= min_noise);
+    gate.filter(|_| noisy)
+}
+
 /// [`depth_noise`] with a caller's scratch buffer (no allocation once it is large enough).
 pub fn depth_noise_with(depth: &DepthImage, mask: &Mask, diffs: &mut Vec<f64>) -> Option<f64> {
     const EDGE: f64 = 40.0;
