@@ -1,4 +1,5 @@
-//! Helpers for checking Jacobians against central finite differences (STYLE practice 10).
+//! Helpers for checking Jacobians against central finite differences (STYLE practice 10), and
+//! test data shared by the trackers' tests.
 
 /// Relative error `‖a − b‖ / max(‖a‖, ‖b‖, floor)` used by the Jacobian checks; `floor` keeps
 /// near-zero columns from amplifying rounding noise.
@@ -35,4 +36,22 @@ pub fn cylinder_test_pose(model: &crate::cylinder::CylinderModel) -> crate::kine
         ],
     )
     .expect("every cylinder model has the 26 named DOFs")
+}
+
+/// `points` moved along their camera rays (from the origin) by Gaussian noise of σ mm, the
+/// depth noise of a sensor (Box–Muller); `uniform` draws each point's two independent uniforms,
+/// the first in (0, 1], the second in [0, 1).
+pub fn with_depth_noise(
+    points: &[nalgebra::Vector3<f64>],
+    sigma: f64,
+    mut uniform: impl FnMut() -> (f64, f64),
+) -> Vec<nalgebra::Vector3<f64>> {
+    points
+        .iter()
+        .map(|p| {
+            let (u1, u2) = uniform();
+            let n = (-2.0 * u1.ln()).sqrt() * (std::f64::consts::TAU * u2).cos() * sigma;
+            p * (1.0 + n / p.norm())
+        })
+        .collect()
 }

@@ -255,14 +255,9 @@ fn seeded_correspondences_equal_a_fresh_search() {
 fn with_depth_noise(points: &[Vector3<f64>], sigma: f64, seed: u64) -> Vec<Vector3<f64>> {
     use rand::{Rng, SeedableRng};
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
-    points
-        .iter()
-        .map(|p| {
-            let (u1, u2): (f64, f64) = (rng.random_range(1e-12..1.0), rng.random());
-            let n = (-2.0 * u1.ln()).sqrt() * (std::f64::consts::TAU * u2).cos() * sigma;
-            p * (1.0 + n / p.norm())
-        })
-        .collect()
+    hand_model::testing::with_depth_noise(points, sigma, || {
+        (rng.random_range(1e-12..1.0), rng.random())
+    })
 }
 
 /// A context seen through the sensor's pinhole at the origin, default IRLS.

@@ -319,7 +319,11 @@ impl<'m> TrackingCtx<'m> {
             else {
                 continue;
             };
+            // The palm's foot points are htrack's approximation: keep the entry itself.
+            let d = x - point;
             q.segment = segment;
+            q.point = point;
+            q.distance = d.norm().copysign(q.normal.dot(&d));
             let res = q.normal.dot(&(q.point - x));
             self.residuals[i] = res;
             self.weights[i] = if self.reweighted {

@@ -20,6 +20,12 @@
 //!   DESIGN.md record per frame (`hands track`);
 //! - [`synthetic`]: ray-marched point clouds of the posed model for tests.
 //!
+//! Beyond the thesis: on frames whose measured depth noise is ≥ 1.5 mm
+//! ([`TrackerConfig::ray_gate`], `ray_gate_noise`; `hands track --ray-gate`) the points register
+//! where their camera rays enter the model ([`TrackingCtx::set_ray_gate`]), as in the sphere-mesh
+//! tracker: the front-facing closest points are biased under depth noise, the entries are not,
+//! and they come from the silhouette rendering extended to the points' pixels.
+//!
 //! The priors (joint limits, damping, temporal, PCA pose prior) are the shared terms of
 //! [`hand_model::solver::terms`], which run on [`TrackingCtx`] through
 //! [`hand_model::solver::PoseContext`].
@@ -57,6 +63,8 @@ mod tracker;
 mod tests;
 #[cfg(test)]
 mod tests_e2d;
+#[cfg(test)]
+mod tests_ray;
 
 pub use context::{CorrespondenceCallback, TrackingCtx, DEFAULT_RAY_SLIDE};
 pub use hand_model::solver::IrlsParams;

@@ -55,7 +55,7 @@ fn perturbed_pose(model: &CylinderModel, target: &Pose) -> Pose {
     p
 }
 
-fn keypoint_error(model: &CylinderModel, a: &Pose, b: &Pose) -> (f64, f64) {
+pub(crate) fn keypoint_error(model: &CylinderModel, a: &Pose, b: &Pose) -> (f64, f64) {
     let ka = model.keypoints(&model.posed(a).unwrap());
     let kb = model.keypoints(&model.posed(b).unwrap());
     let d: Vec<f64> = ka.iter().zip(&kb).map(|(x, y)| (x - y).norm()).collect();

@@ -15,7 +15,7 @@ use crate::tests::{camera, target_pose};
 use crate::{IrlsParams, SensorView, TrackingCtx};
 
 /// The sensor camera of the synthetic scenes (the intrinsics of [`camera`]).
-fn sensor_camera() -> Camera {
+pub(crate) fn sensor_camera() -> Camera {
     let c = camera();
     Camera::new("synthetic", c.width, c.height, c.fx, c.fy, c.cx, c.cy).unwrap()
 }
