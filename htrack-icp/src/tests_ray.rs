@@ -5,17 +5,18 @@ use hand_model::kinematics::Pose;
 use nalgebra::Vector3;
 use sensor_io::dt::DistanceTransform;
 use sensor_io::preprocess::{HandSegment, PreprocessedFrame};
-use sensor_io::Mask;
+use sensor_io::{DepthImage, Mask};
 
 use hand_model::solver::LmOptions;
 
 use crate::terms::E3d;
 use crate::tests::{camera, keypoint_error, solve_terms, target_pose};
 use crate::tests_e2d::sensor_camera;
-use crate::{IrlsParams, TrackingCtx};
+use crate::{IrlsParams, Tracker, TrackerConfig, TrackingCtx};
 
 /// The frame the sensor sees of `model` at `pose`: every rendered pixel a point with its pixel,
-/// moved along its ray by Gaussian depth noise of `sigma` mm; the silhouette is the rendering's.
+/// moved along its ray by Gaussian depth noise of `sigma` mm, and the depth image of those
+/// points (mm, rounded); the silhouette is the rendering's.
 fn noisy_frame(model: &CylinderModel, pose: &Pose, sigma: f64, seed: u64) -> PreprocessedFrame {
     use rand::{Rng, SeedableRng};
     let mut raster = CylinderRaster::new();
@@ -38,9 +39,18 @@ fn noisy_frame(model: &CylinderModel, pose: &Pose, sigma: f64, seed: u64) -> Pre
     let points = hand_model::testing::with_depth_noise(&exact, sigma, || {
         (rng.random_range(1e-12..1.0), rng.random())
     });
+    let mut depth = DepthImage {
+        width: cam.width,
+        height: cam.height,
+        data: vec![0; cam.width as usize * cam.height as usize],
+    };
+    for (&k, p) in raster.hits().iter().zip(&points) {
+        depth.data[k as usize] = p.z.round().clamp(1.0, 65535.0) as u16;
+    }
     PreprocessedFrame {
         points,
         pixels: raster.hits().to_vec(),
+        depth,
         camera: Some(cam),
         dt,
         hand: HandSegment {
@@ -130,4 +140,27 @@ fn rendered_entries_equal_single_ray_casts_within_gate_and_slide() {
     }
     println!("{moved} of {} points registered along their rays", frame.points.len());
     assert!(moved * 2 > frame.points.len(), "{moved} points moved");
+}
+
+/// The tracker registers along the rays on the frames whose measured depth noise reaches
+/// [`TrackerConfig::ray_gate_noise`] and keeps the thesis' rule on exact (rounded) depth.
+#[test]
+fn along_ray_correspondences_follow_the_measured_noise() {
+    let model = default_right_hand_cylinders();
+    let truth = target_pose(&model);
+    let config = TrackerConfig::default();
+    assert_eq!(config.ray_gate_for(None), None, "not measured yet");
+    assert_eq!(config.ray_gate_for(Some(0.5)), None);
+    assert_eq!(config.ray_gate_for(Some(5.0)), config.ray_gate);
+    for (sigma, on) in [(0.0, false), (4.0, true)] {
+        let mut tracker = Tracker::new(&model, config.clone(), None).unwrap();
+        tracker.set_pose(&truth).unwrap();
+        let record = tracker.track(&noisy_frame(&model, &truth, sigma, 3), 0, 0.0);
+        assert!(record.is_finite());
+        assert_eq!(
+            tracker.context().ray_gate(),
+            config.ray_gate.filter(|_| on),
+            "σ = {sigma}"
+        );
+    }
 }
