@@ -22,9 +22,7 @@ use sensor_io::preprocess::{gate_for_noise, NoiseMonitor, PreprocessedFrame};
 use sensor_io::record::HandRecord;
 use serde::{Deserialize, Serialize};
 
-use crate::context::{
-    CorrespondenceCallback, M2dMode, TrackingCtx, DEFAULT_RAY_SLIDE,
-};
+use crate::context::{CorrespondenceCallback, M2dMode, TrackingCtx, DEFAULT_RAY_SLIDE};
 use crate::terms::{Collision, CollisionParams, D2m, D2mParams, M2d, M2dParams};
 
 /// Which terms of Eq. 3.3 take part (the `--no-<term>` switches of `hands track`).

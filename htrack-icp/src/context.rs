@@ -159,7 +159,9 @@ impl<'m> TrackingCtx<'m> {
         self.sensor.set_frame(frame);
         if let Some(c) = frame.camera.as_ref() {
             let n = c.width as usize * c.height as usize;
-            if frame.pixels.len() == frame.points.len() && frame.pixels.iter().all(|&k| (k as usize) < n) {
+            if frame.pixels.len() == frame.points.len()
+                && frame.pixels.iter().all(|&k| (k as usize) < n)
+            {
                 self.point_pixels.resize(n, false);
                 for &k in &frame.pixels {
                     self.point_pixels[k as usize] = true;

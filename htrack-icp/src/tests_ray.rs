@@ -90,7 +90,10 @@ fn along_ray_correspondences_drift_less_under_depth_noise() {
         "E3D from the true pose, σ = 4 mm: mean keypoint drift closest {closest:.3} mm, along \
          rays {along_ray:.3} mm"
     );
-    assert!(along_ray < 0.8 * closest, "closest {closest}, along rays {along_ray}");
+    assert!(
+        along_ray < 0.8 * closest,
+        "closest {closest}, along rays {along_ray}"
+    );
 }
 
 /// The entries read from the rendering of the points' pixels are the single-ray casts of points
@@ -126,19 +129,31 @@ fn rendered_entries_equal_single_ray_casts_within_gate_and_slide() {
             cast.correspondences()[i].unwrap(),
             thesis.correspondences()[i].unwrap(),
         );
-        assert!((r.point - c.point).norm() < 1e-9, "point {i}: {r:?} vs {c:?}");
+        assert!(
+            (r.point - c.point).norm() < 1e-9,
+            "point {i}: {r:?} vs {c:?}"
+        );
         assert!((r.normal - c.normal).norm() < 1e-9, "point {i}");
-        assert!((rendered.residuals()[i] - cast.residuals()[i]).abs() < 1e-9, "point {i}");
+        assert!(
+            (rendered.residuals()[i] - cast.residuals()[i]).abs() < 1e-9,
+            "point {i}"
+        );
         if (r.point - t.point).norm() > 1e-9 {
             moved += 1;
-            assert!((r.point - x).norm() <= 20.0 + 1e-9, "point {i} beyond the gate");
+            assert!(
+                (r.point - x).norm() <= 20.0 + 1e-9,
+                "point {i} beyond the gate"
+            );
             assert!(
                 (r.point - t.point).norm() <= crate::DEFAULT_RAY_SLIDE + 1e-9,
                 "point {i} slid beyond the limit"
             );
         }
     }
-    println!("{moved} of {} points registered along their rays", frame.points.len());
+    println!(
+        "{moved} of {} points registered along their rays",
+        frame.points.len()
+    );
     assert!(moved * 2 > frame.points.len(), "{moved} points moved");
 }
 

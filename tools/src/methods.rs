@@ -387,7 +387,11 @@ impl MethodModel for CylinderMethodModel {
     ) -> Result<Box<dyn FrameTracker + 'a>> {
         let mut cfg: htrack_icp::TrackerConfig = read_config(s.config.as_deref())?;
         apply_switches!(cfg, s, [e3d, e2d, wrist]);
-        apply_ray_gate(s.ray_gate.as_deref(), &mut cfg.ray_gate, &mut cfg.ray_gate_noise)?;
+        apply_ray_gate(
+            s.ray_gate.as_deref(),
+            &mut cfg.ray_gate,
+            &mut cfg.ray_gate_noise,
+        )?;
         Ok(Box::new(CylinderTracker::new(&self.0, cfg, prior)?))
     }
 
@@ -473,7 +477,11 @@ impl MethodModel for SphereMeshMethodModel {
         if let Some(m) = &s.m2d {
             cfg.m2d_mode = m2d_mode(m)?;
         }
-        apply_ray_gate(s.ray_gate.as_deref(), &mut cfg.ray_gate, &mut cfg.ray_gate_noise)?;
+        apply_ray_gate(
+            s.ray_gate.as_deref(),
+            &mut cfg.ray_gate,
+            &mut cfg.ray_gate_noise,
+        )?;
         apply_switches!(cfg, s, [d2m, m2d]);
         Ok(Box::new(SphereMeshTracker::new(&self.0, cfg, prior)?))
     }
@@ -533,7 +541,11 @@ impl MethodModel for OnlineMethodModel {
         if let Some(m) = &s.m2d {
             tc.m2d_mode = m2d_mode(m)?;
         }
-        apply_ray_gate(s.ray_gate.as_deref(), &mut tc.ray_gate, &mut tc.ray_gate_noise)?;
+        apply_ray_gate(
+            s.ray_gate.as_deref(),
+            &mut tc.ray_gate,
+            &mut tc.ray_gate_noise,
+        )?;
         apply_switches!(tc, s, [d2m, m2d]);
         Ok(Box::new(OnlineTracker::new(
             &self.template,
