@@ -20,8 +20,12 @@ pub(crate) fn sensor_camera() -> Camera {
     Camera::new("synthetic", c.width, c.height, c.fx, c.fy, c.cx, c.cy).unwrap()
 }
 
-/// The sensor view whose silhouette is the rasterized model at `pose`.
-fn silhouette_of(model: &CylinderModel, pose: &Pose) -> SensorView {
+/// The model at `pose` rasterized from [`sensor_camera`], its silhouette and the silhouette's
+/// distance transform.
+pub(crate) fn rendered_silhouette(
+    model: &CylinderModel,
+    pose: &Pose,
+) -> (CylinderRaster, Mask, DistanceTransform) {
     let mut raster = CylinderRaster::new();
     raster
         .render(model, &model.posed(pose).unwrap(), &camera())
@@ -33,6 +37,13 @@ fn silhouette_of(model: &CylinderModel, pose: &Pose) -> SensorView {
     }
     let mut dt = DistanceTransform::default();
     dt.compute(&mask);
+    (raster, mask, dt)
+}
+
+/// The sensor view whose silhouette is the rasterized model at `pose`.
+fn silhouette_of(model: &CylinderModel, pose: &Pose) -> SensorView {
+    let (_, _, dt) = rendered_silhouette(model, pose);
+    let cam = sensor_camera();
     SensorView {
         camera: Some(cam),
         nearest: dt.nearest,

@@ -1,17 +1,15 @@
 //! Tests of the along-ray correspondences ([`TrackingCtx::set_ray_gate`]).
 
-use hand_model::cylinder::{default_right_hand_cylinders, CylinderModel, CylinderRaster, View};
+use hand_model::cylinder::{default_right_hand_cylinders, CylinderModel, View};
 use hand_model::kinematics::Pose;
-use nalgebra::Vector3;
-use sensor_io::dt::DistanceTransform;
-use sensor_io::preprocess::{HandSegment, PreprocessedFrame};
-use sensor_io::{DepthImage, Mask};
-
 use hand_model::solver::LmOptions;
+use nalgebra::Vector3;
+use sensor_io::preprocess::{HandSegment, PreprocessedFrame};
+use sensor_io::DepthImage;
 
 use crate::terms::E3d;
-use crate::tests::{camera, keypoint_error, solve_terms, target_pose};
-use crate::tests_e2d::sensor_camera;
+use crate::tests::{keypoint_error, solve_terms, target_pose};
+use crate::tests_e2d::{rendered_silhouette, sensor_camera};
 use crate::{IrlsParams, Tracker, TrackerConfig, TrackingCtx};
 
 /// The frame the sensor sees of `model` at `pose`: every rendered pixel a point with its pixel,
@@ -19,17 +17,8 @@ use crate::{IrlsParams, Tracker, TrackerConfig, TrackingCtx};
 /// points (mm, rounded); the silhouette is the rendering's.
 fn noisy_frame(model: &CylinderModel, pose: &Pose, sigma: f64, seed: u64) -> PreprocessedFrame {
     use rand::{Rng, SeedableRng};
-    let mut raster = CylinderRaster::new();
-    raster
-        .render(model, &model.posed(pose).unwrap(), &camera())
-        .unwrap();
+    let (raster, mask, dt) = rendered_silhouette(model, pose);
     let cam = sensor_camera();
-    let mut mask = Mask::zeros(cam.width, cam.height);
-    for &i in raster.hits() {
-        mask.data[i as usize] = 1;
-    }
-    let mut dt = DistanceTransform::default();
-    dt.compute(&mask);
     let exact: Vec<Vector3<f64>> = raster
         .hits()
         .iter()
