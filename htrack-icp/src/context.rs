@@ -6,8 +6,8 @@
 //!
 //! Beyond the thesis, under depth noise the points can register where their camera rays enter
 //! the model ([`TrackingCtx::set_ray_gate`]), as the sphere-mesh tracker's do: a closest point
-//! is biased outward under noise along the rays (a noisy point in front of a cylinder finds its
-//! foot point on the cylinder's side, one behind it deep in its silhouette), the ray's entry is
+//! is biased under noise along the rays (a noisy point in front of a cylinder finds its foot
+//! point on the cylinder's side, one behind it is pulled to its silhouette), the ray's entry is
 //! not. The entries come from the same rendering as `S_r`, extended to the points' pixels.
 
 use hand_model::cylinder::{
@@ -28,8 +28,9 @@ use sensor_io::SensorView;
 /// ([`TrackingCtx::set_silhouette`], on by default) it also holds the rendered silhouette `S_r`
 /// of the model (§2.3.1 "2D correspondences"): the posed model rasterized from the sensor camera
 /// ([`CylinderRaster`]), per pixel the segment, its bone and the camera-frame surface point —
-/// only for the pixels outside the sensor silhouette `S_s` (`S_r \ S_s`, all E2D needs; the
-/// others are not ray cast).
+/// only for the pixels outside the sensor silhouette `S_s` (`S_r \ S_s`, all E2D needs) and,
+/// with along-ray correspondences ([`TrackingCtx::set_ray_gate`]), the points' own pixels; the
+/// others are not ray cast.
 ///
 /// Refreshed by [`TrackingCtx::update`] (called by [`CorrespondenceCallback`] before every LM
 /// iteration); nothing allocates once the buffers have held the current number of points and
@@ -145,8 +146,9 @@ impl<'m> TrackingCtx<'m> {
     }
 
     /// The rendered model at the last update (§2.3.1 "2D correspondences"): per pixel of the
-    /// sensor camera the segment, bone and camera-frame point of the first hit; empty without a
-    /// camera, with the silhouette disabled or for a non-finite pose.
+    /// sensor camera the segment, bone and camera-frame point of the first hit, on the pixels
+    /// outside the sensor silhouette and (along-ray correspondences) the points' pixels; empty
+    /// without a camera, with neither enabled, or for a non-finite pose.
     pub fn raster(&self) -> &CylinderRaster {
         &self.raster
     }
