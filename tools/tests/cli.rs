@@ -529,6 +529,7 @@ fn report_ch2_runs_on_a_few_frames() {
         "silhouette",
         "pca_projective",
         "rigid_first",
+        "along_ray",
         "temporal",
     ] {
         assert!(md.contains(&format!("## {id}")), "{id} missing");
