@@ -69,9 +69,9 @@ pub struct TrackingCtx<'m> {
 /// 5 mm: the cylinders fit a hand less closely, so the entries of well-placed points lie
 /// farther from their closest points. `hands track --model cylinders` from the default hand,
 /// ToF sequences of 240 frames (mean keypoint error, mm; thesis' rule first, then slides 5 /
-/// 7.5 / 10 / 15 / ∞): teaser 4.92 → 4.40 / 4.21 / 4.18 / 4.23 / 4.25, fist 6.57 → 5.20 /
-/// 4.72 / 4.66 / 4.41 / 4.47, rotation_fast 11.65 → 7.81 / 6.27 / 5.82 / 5.35 / 5.34,
-/// occlusion 22.03 → 10.72 / 8.90 / 8.59 / 20.40 / 20.55: beyond ≈ 10 mm the rays of the palm's
+/// 7.5 / 10 / 15 / ∞): teaser 4.92 → 4.41 / 4.21 / 4.18 / 4.23 / 4.24, fist 6.57 → 5.18 /
+/// 4.72 / 4.66 / 4.41 / 4.48, rotation_fast 11.65 → 7.74 / 6.27 / 5.82 / 5.35 / 5.35,
+/// occlusion 22.03 → 11.77 / 8.90 / 8.59 / 20.40 / 20.66: beyond ≈ 10 mm the rays of the palm's
 /// points enter a finger held in front of it and pull it down, so the default keeps a margin.
 pub const DEFAULT_RAY_SLIDE: f64 = 7.5;
 
