@@ -128,9 +128,10 @@ fn teaser_sensor_noise() {
 /// (`ray_gate_noise` 0) against the thesis' rule: the closest point of a noisy point is biased
 /// outward on curved parts (≈ σ² sin²φ / 2r) and the front-facing rule pulls points behind a
 /// silhouette inward, while the residual along the ray is linear in the depth noise. Measured
-/// on the teaser (closest points → along rays, mean keypoint error): ToF 1.512 → 0.995 mm
-/// (0.66×), structured light 0.325 → 0.321 mm, noise-free 0.178 → 0.183 mm (1.03×) — which
-/// is why by default they run only from a measured noise of 1.5 mm (under ToF here).
+/// on the teaser (closest points → along rays, mean keypoint error, slide 7.5 mm; 5 mm
+/// before session 18): ToF 1.512 → 0.910 mm (0.60×; 0.995 with 5 mm), structured light 0.325
+/// → 0.321 mm, noise-free 0.178 → 0.178 mm (0.183 with 5 mm) at twice the correspondence time
+/// — which is why by default they run only from a measured noise of 1.5 mm (under ToF here).
 #[test]
 fn along_ray_correspondences_track_better_under_depth_noise() {
     let thesis = TrackerConfig {

@@ -65,9 +65,8 @@ pub struct TrackingCtx<'m> {
     point_pixels: Vec<bool>,
 }
 
-/// The default of [`TrackingCtx::set_ray_slide`] (mm). Larger than the sphere-mesh tracker's
-/// 5 mm: the cylinders fit a hand less closely, so the entries of well-placed points lie
-/// farther from their closest points. `hands track --model cylinders` from the default hand,
+/// The default of [`TrackingCtx::set_ray_slide`] (mm), the sphere-mesh tracker's too (its
+/// own measurements in `hmodel_spheremesh::DEFAULT_RAY_SLIDE`). `hands track --model cylinders` from the default hand,
 /// ToF sequences of 240 frames (mean keypoint error, mm; thesis' rule first, then slides 5 /
 /// 7.5 / 10 / 15 / ∞): teaser 4.92 → 4.41 / 4.21 / 4.18 / 4.23 / 4.24, fist 6.57 → 5.18 /
 /// 4.72 / 4.66 / 4.41 / 4.48, rotation_fast 11.65 → 7.74 / 6.27 / 5.82 / 5.35 / 5.35,
