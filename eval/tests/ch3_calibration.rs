@@ -198,8 +198,9 @@ fn calibrates_random_subjects_from_eight_tracked_frames() {
 
 /// The same with the ToF noise model (issue 6 "With ToF noise: report"): two subjects; the
 /// calibrated template must still be closer to the truth than the default, its radii within
-/// 0.75 mm. Measured: centers 5.55 → 2.40 and 2.63 → 2.34 mm, radii 0.26 → 0.47 and 0.48 →
-/// 0.61 mm, with the priors scaled by the measured noise (`CalibrationConfig::noise_scaled_priors`;
+/// 0.75 mm. Measured: centers 5.55 → 2.51 and 2.63 → 2.05 mm, radii 0.26 → 0.41 and 0.48 →
+/// 0.40 mm (with the 5 mm along-ray slide before session 18: 2.40 / 2.34 mm, 0.47 / 0.61 mm),
+/// with the priors scaled by the measured noise (`CalibrationConfig::noise_scaled_priors`;
 /// without: centers 3.63 and 2.88 mm, subject 2 worse than the default template) and the depth
 /// frames' points registered along their camera rays (`CalibrationConfig::ray_gate`; with
 /// closest points: centers 3.13 / 2.36 mm, radii 0.86 / 0.99 mm — the noise thinned them).
