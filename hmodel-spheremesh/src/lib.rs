@@ -47,14 +47,14 @@
 //!   limit of sessions 16–17, 0.864 without the limit below), structured light 0.325 → 0.321
 //!   mm, noise-free 0.178 → 0.178 mm (0.183 with 5 mm).
 //!   - The entry must lie within 7.5 mm of the point's closest point
-//!     ([`TrackerConfig::ray_slide`], [`DEFAULT_RAY_SLIDE`]): a ray that first enters another part of the model (a
-//!     finger the pose put in front of the palm's points) otherwise pulls that part onto data
-//!     of the one behind it. Without the limit, `hands track` from the default template lost
-//!     the hand on a structured-light `occlusion` sequence (mean keypoint error 7.9 → 18.1 mm,
-//!     with online calibration 1.8 → 15.5 mm); with it 7.9 / 1.8 mm (5 mm until session 18;
-//!     7.5 mm tracks ToF sequences slightly better, see [`DEFAULT_RAY_SLIDE`]). Requiring the entry on the
-//!     closest point's element instead lost most of the gain (mixing the two rules at the
-//!     elements' junctions biases again).
+//!     ([`TrackerConfig::ray_slide`], [`DEFAULT_RAY_SLIDE`]): a ray that first enters another
+//!     part of the model (a finger the pose put in front of the palm's points) otherwise pulls
+//!     that part onto data of the one behind it. Without the limit, `hands track` from the
+//!     default template lost the hand on a structured-light `occlusion` sequence (mean keypoint
+//!     error 7.9 → 18.1 mm, with online calibration 1.8 → 15.5 mm); with it 7.9 / 1.8 mm (5 mm
+//!     until session 18; 7.5 mm tracks ToF sequences slightly better, see
+//!     [`DEFAULT_RAY_SLIDE`]). Requiring the entry on the closest point's element instead lost
+//!     most of the gain (mixing the two rules at the elements' junctions biases again).
 //!   - They run on the frames whose measured depth noise ([`sensor_io::preprocess::NoiseMonitor`])
 //!     is at least 1.5 mm ([`TrackerConfig::ray_gate_noise`]): on exact or quantized depth
 //!     they gain nothing (0.178 → 0.178 mm above) and cost about four times the closest
@@ -68,6 +68,8 @@
 //!     keypoint error, thesis' rule → default): ToF teaser 3.80 → 3.70 mm (online calibration
 //!     2.72 → 1.75), ToF fist 3.91 → 3.77 (3.07 → 2.45), ToF `rotation_fast` 5.74 → 5.40 (4.57
 //!     → 4.08); noise-free and structured-light sequences unchanged (the gate stays off).
+//!     With the 7.5 mm slide: teaser 3.69 (1.57), fist 3.77 (2.38), `rotation_fast` 5.19
+//!     (4.12).
 //! - Priors: τ_pose = 1e4 on the project's PCA prior, joint limits 1e7, htrack's temporal
 //!   weights (3, 3; hmodel used 0.05) and uniform damping λ = 100 (shared with Ch. 2).
 //!
