@@ -309,6 +309,19 @@ pub fn run_online(
     motion: &CalibrationMotion,
     config: OnlineConfig,
 ) -> anyhow::Result<OnlineRun> {
+    let seq = calibration_sequence(spec, truth, motion)?;
+    run_online_on(seq, truth, start, motion, config)
+}
+
+/// [`run_online`] on a given sequence `seq` of a hand moving as `motion` (another person's
+/// hand: [`SyntheticSequence::custom_hand`]); `truth` is what E_β measures against.
+pub fn run_online_on(
+    mut seq: SyntheticSequence,
+    truth: &[f64],
+    start: Option<&[f64]>,
+    motion: &CalibrationMotion,
+    config: OnlineConfig,
+) -> anyhow::Result<OnlineRun> {
     let base = default_right_hand();
     let prior = PcaPrior::project_default();
     let mut calib = OnlineCalibrator::new(&base, config, Some(&prior))?;
@@ -316,8 +329,7 @@ pub fn run_online(
         calib.set_shape(beta)?;
     }
     calib.set_pose(&motion.pose_at(0.0))?;
-    let mut seq = calibration_sequence(spec, truth, motion)?;
-    let mut frames = Vec::with_capacity(spec.frames);
+    let mut frames = Vec::with_capacity(seq.spec().frames);
     let run = seq.run(
         |f, t| {
             let out = calib.track(f, t.frame, t.timestamp);
@@ -449,7 +461,18 @@ fn run_fixed_template(
     config: TrackerConfig,
     template: Option<SphereMeshTemplate>,
 ) -> anyhow::Result<SyntheticRun> {
-    let mut seq = calibration_sequence(spec, truth, motion)?;
+    let seq = calibration_sequence(spec, truth, motion)?;
+    run_template_on(seq, motion, config, template)
+}
+
+/// Track `seq` (a hand moving as `motion`) with the Ch. 3 tracker on a fixed template:
+/// `template`, or the rendered hand's own when `None`.
+pub fn run_template_on(
+    mut seq: SyntheticSequence,
+    motion: &CalibrationMotion,
+    config: TrackerConfig,
+    template: Option<SphereMeshTemplate>,
+) -> anyhow::Result<SyntheticRun> {
     let template = template.unwrap_or_else(|| seq.template().clone());
     let prior = PcaPrior::project_default();
     let mut tracker = Tracker::new(&template, config, Some(&prior))?;

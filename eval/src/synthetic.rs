@@ -159,17 +159,37 @@ impl SyntheticSequence {
         Self::build(spec, beta, Poses::Custom(Box::new(poses)))
     }
 
+    /// [`SyntheticSequence::custom`] for a hand outside the default template's β space:
+    /// `hand` rendered as it is (a template of the default skeleton, whose pose `poses`
+    /// writes) — another person's hand carried onto this skeleton, with its own rest rotations
+    /// and sphere offsets.
+    pub fn custom_hand(
+        spec: SyntheticSpec,
+        hand: &SphereMeshTemplate,
+        poses: impl FnMut(f64, &mut Pose) + 'static,
+    ) -> anyhow::Result<Self> {
+        Self::build_for(spec, hand, &[], Poses::Custom(Box::new(poses)))
+    }
+
     fn build(spec: SyntheticSpec, beta: &[f64], poses: Poses) -> anyhow::Result<Self> {
+        Self::build_for(spec, &default_right_hand(), beta, poses)
+    }
+
+    fn build_for(
+        spec: SyntheticSpec,
+        template: &SphereMeshTemplate,
+        beta: &[f64],
+        poses: Poses,
+    ) -> anyhow::Result<Self> {
         anyhow::ensure!(
             spec.fps.is_finite() && spec.fps > 0.0,
             "fps must be positive, got {}",
             spec.fps
         );
-        let template = default_right_hand();
         let sensor = SensorModel::by_name(&spec.noise)
             .ok_or_else(|| anyhow::anyhow!("unknown noise model `{}`", spec.noise))?;
         let synth = Synthesizer::new(
-            &template,
+            template,
             beta,
             SceneConfig {
                 camera: spec.camera.clone(),
