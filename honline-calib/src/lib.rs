@@ -144,13 +144,15 @@
 //!   over issue 8's calibration motion (300 frames, last-third keypoint error): noise-free
 //!   6.57 mm uncalibrated, 3.12 mm with online calibration, 0.24 mm with the hand's own model
 //!   (12.8×); ToF 6.64 / 4.29 / 1.55 mm (2.8×). The fingertips come within 1–2 mm; the ring,
-//!   middle and pinky knuckles (MCP keypoints) stay 6–9 mm off and the wrist 5 mm: the fit
-//!   places the knuckles where the palm surface it cannot otherwise reach asks, and a
-//!   misplaced flexion center is traded for the finger's angles. No setting moved it (the
-//!   shape-space and radius priors, barriers and limits off; the null-space or palm subsets;
-//!   the pose prior off; twice the measurement weight: 3.1–3.6 mm); the offline calibration of
-//!   Ch. 3 with rest rotations does no better (2.2 mm from 8 frames), with free sphere offsets
-//!   1.1 mm. The random subjects of the acceptance tests live inside β and do not show this.
+//!   middle and pinky knuckles (MCP keypoints) stay 6–9 mm off, mostly in depth, and the wrist
+//!   5 mm: their `base_z` stays at the template's (ring 2.6 against the hand's 11.0 mm) while
+//!   the knuckle radii shrink (ring 6.7 against 9.0 mm) — from palm-facing views the knuckle's
+//!   palmar surface fits either way and its back is never seen; rolling the hand up to ≈ 110°
+//!   brought the radii nearer (E_β 1.62 → 1.26 mm) but not the knuckles (3.4 mm). No setting
+//!   moved it (the shape-space and radius priors, barriers and limits off; the null-space or
+//!   palm subsets; the pose prior off; twice the measurement weight: 3.1–3.6 mm); the offline
+//!   calibration of Ch. 3 with rest rotations does no better (2.2 mm from 8 frames), with free
+//!   sphere offsets 1.1 mm. The random subjects of the acceptance tests live inside β and do not show this.
 //! - Not yet here: loss detection and re-initialization (the first pose comes from
 //!   [`OnlineCalibrator::set_pose`] or the PCA mean placed on the points).
 //! - The collision term (Ch. 3) tolerates the overlap the model's pills have at the rest pose;
