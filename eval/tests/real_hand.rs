@@ -12,14 +12,14 @@
 //!
 //! Measured (300 frames at 30 Hz, last-third mean keypoint error): noise-free, default
 //! template 6.57 mm, online 3.12 mm, the hand's own model 0.24 mm (12.8×; E_β 1.98 → 1.62
-//! mm); ToF 6.64 / 4.29 / 1.55 mm (2.8×); offline calibration from 8 noise-free frames (the
-//! true poses as its start) 2.20 mm. The calibrated hand keeps its fingertips within 1–2 mm
-//! but not its knuckles: the ring and middle MCP joints stay 7–9 mm off (the authors' MCP
-//! joints lie 6–8 mm further toward the palm side than the template's, `ring_base_z` and
-//! `middle_base_z` barely move from the template's — with the shape-space prior, the radius
-//! prior, the validity barriers and the limits all off as well) and the wrist 5 mm off: on
-//! this motion the depth of a knuckle is traded for the finger's flexion, and the wrist joint
-//! is cut off with the forearm. The guards below hold what is reached.
+//! mm); ToF 6.64 / 4.29 / 1.55 mm (2.8×). Online, the fingertips come within 1–2 mm but the
+//! ring, middle and pinky knuckles (MCP keypoints) stay 6–9 mm off, mostly in depth, and the
+//! wrist 5 mm: the estimate keeps the knuckles' `base_z` at the template's and shrinks their
+//! radii instead (see `honline_calib`'s docs, "Another person's hand"). The offline
+//! calibration of Ch. 3 from 8 noise-free frames (the true poses as its start) reaches 1.01
+//! mm with its free sphere offsets (the default since this test; 2.19 mm with β and rest
+//! rotations alone, which cannot place this palm's spheres). The guards below hold what is
+//! reached.
 
 use std::path::Path;
 
@@ -182,5 +182,6 @@ fn calibrating_a_real_persons_hand() {
         "none: offline calibration (8 frames): {c:.2} mm; worst keypoints (mm): {}",
         worst_keypoints(&run, 5)
     );
-    assert!(c < 0.5 * last_third_error(&fixed(&hand, "none", Some(default_right_hand()))));
+    // β and rest rotations alone reach 2.19 mm (a third of the default template's error).
+    assert!(c < 0.25 * last_third_error(&fixed(&hand, "none", Some(default_right_hand()))));
 }

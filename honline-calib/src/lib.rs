@@ -150,9 +150,9 @@
 //!   palmar surface fits either way and its back is never seen; rolling the hand up to ≈ 110°
 //!   brought the radii nearer (E_β 1.62 → 1.26 mm) but not the knuckles (3.4 mm). No setting
 //!   moved it (the shape-space and radius priors, barriers and limits off; the null-space or
-//!   palm subsets; the pose prior off; twice the measurement weight: 3.1–3.6 mm); the offline
-//!   calibration of Ch. 3 with rest rotations does no better (2.2 mm from 8 frames), with free
-//!   sphere offsets 1.1 mm. The random subjects of the acceptance tests live inside β and do not show this.
+//!   palm subsets; the pose prior off; twice the measurement weight: 3.1–3.6 mm). The offline
+//!   calibration of Ch. 3 reaches 1.01 mm from 8 frames with its per-sphere offsets (2.19 mm
+//!   with β and rest rotations alone): what β lacks is the palm spheres' placement. The random subjects of the acceptance tests live inside β and do not show this.
 //! - Not yet here: loss detection and re-initialization (the first pose comes from
 //!   [`OnlineCalibrator::set_pose`] or the PCA mean placed on the points).
 //! - The collision term (Ch. 3) tolerates the overlap the model's pills have at the rest pose;

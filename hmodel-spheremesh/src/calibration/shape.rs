@@ -22,7 +22,9 @@
 
 use hand_model::kinematics::Skeleton;
 use hand_model::math::{exp_so3, Rigid3};
-use hand_model::spheremesh::{Attachment, PosedSphereMesh, ShapeBasis, SphereMeshTemplate};
+use hand_model::spheremesh::{
+    Attachment, PosedSphereMesh, ShapeBasis, SphereDef, SphereMeshTemplate,
+};
 use hand_model::ModelError;
 use nalgebra::{DMatrix, DVector, Matrix3, Vector3};
 
@@ -352,13 +354,6 @@ pub fn fit_rest_spheres(
             ),
         });
     }
-    // A sphere centered on its bone's origin marks the joint (every phalanx's first sphere):
-    // its free offset would part it from the joint that β moves with it.
-    let on_joint: Vec<bool> = base
-        .spheres
-        .iter()
-        .map(|s| matches!(&s.attachment, Attachment::Bone { offset, .. } if offset.norm() < 1e-9))
-        .collect();
     let space = ShapeSpace::new(base, true)?;
     let n = space.len();
     let first_free = space.num_beta() + space.rotation_offsets().count() * 3;
@@ -401,7 +396,11 @@ pub fn fit_rest_spheres(
         }
         for (s, o) in space.sphere_offsets() {
             for j in 0..4 {
-                let w = if j < 3 && on_joint[s] { 10.0 } else { 1e-2 };
+                let w = if j < 3 && on_joint(&base.spheres[s]) {
+                    10.0
+                } else {
+                    1e-2
+                };
                 add(&[(o + j, 1.0)], state.free[o - first_free + j], w);
             }
         }
@@ -446,6 +445,13 @@ pub fn fit_rest_spheres(
         .sum::<f64>()
         / k;
     Ok((t, centers, radii))
+}
+
+/// Whether `sphere` is centered on its bone's origin, the joint (every phalanx's first sphere):
+/// β moves that joint with it, and a free center offset would part the two, which the
+/// keypoints (the joints) then miss.
+pub(crate) fn on_joint(sphere: &SphereDef) -> bool {
+    matches!(&sphere.attachment, Attachment::Bone { offset, .. } if offset.norm() < 1e-9)
 }
 
 /// The frame of bone `k` before its own DOFs act (`G_parent ∘ T̄_k`).
