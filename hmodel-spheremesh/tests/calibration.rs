@@ -97,7 +97,8 @@ fn recovers_a_perturbed_subject_from_eight_depth_frames() {
     assert!(after.0 < 1.5 && after.1 < 1.0, "{after:?}");
 }
 
-/// Bad input: too few frames, mismatched poses, empty or non-finite frames are clear errors.
+/// Bad input: too few frames, mismatched poses, empty or non-finite frames and absurd settings
+/// are clear errors.
 #[test]
 fn rejects_bad_input_clearly() {
     let base = default_right_hand();
@@ -122,7 +123,48 @@ fn rejects_bad_input_clearly() {
     bad.points[3].x = f64::NAN;
     assert!(err(&[frame.clone(), bad], &[pose.clone(), pose.clone()]).contains("non-finite"));
     let empty = CalibrationFrame::cloud(Vec::new());
-    assert!(err(&[frame, empty], &[pose.clone(), pose]).contains("fewer than 50"));
+    assert!(err(&[frame.clone(), empty], &[pose.clone(), pose.clone()]).contains("fewer than 50"));
+    // Absurd settings are named, not solved.
+    let two = [frame.clone(), frame];
+    let poses = [pose.clone(), pose];
+    for (config, name) in [
+        (
+            CalibrationConfig {
+                prior_free_joint: -1.0,
+                ..CalibrationConfig::default()
+            },
+            "prior_free_joint",
+        ),
+        (
+            CalibrationConfig {
+                d2m: f64::NAN,
+                ..CalibrationConfig::default()
+            },
+            "d2m",
+        ),
+        (
+            CalibrationConfig {
+                radius_limits: [30.0, 1.5],
+                ..CalibrationConfig::default()
+            },
+            "radius_limits",
+        ),
+        (
+            CalibrationConfig {
+                ray_gate: Some(0.0),
+                ..CalibrationConfig::default()
+            },
+            "ray_gate",
+        ),
+    ] {
+        let e = calibrate(&base, &two, &poses, &config)
+            .err()
+            .map(|e| e.to_string());
+        assert!(
+            e.as_deref().is_some_and(|e| e.contains(name)),
+            "{name}: {e:?}"
+        );
+    }
 }
 
 /// Fig. 3.8 "kinematic calibration matters": a subject whose finger rest frames are turned

@@ -331,9 +331,10 @@ pub struct SphereTarget {
 /// place them) and the other free offsets (10⁻² per mm², which only holds the spheres without a
 /// target), `iterations` Levenberg–Marquardt steps. Measured on the authors' final model of
 /// `hand-scans-tkach`: rest centers within 0.19 mm of theirs; with the joint spheres as free as
-/// the rest (10⁻²), within 0.03 mm but the joints 1–3.3 mm off their spheres. Returns the template with the
-/// mean center distance and mean absolute radius difference (mm) left at the targets. Errors:
-/// no target, a target index out of range or not finite, a `base` without the honline β basis.
+/// the rest (10⁻²), within 0.03 mm but the joints 1–3.3 mm off their spheres. Returns the
+/// template with the mean center distance and mean absolute radius difference (mm) left at the
+/// targets. Errors: no target, a target index out of range or not finite, a `base` without the
+/// honline β basis.
 pub fn fit_rest_spheres(
     base: &SphereMeshTemplate,
     targets: &[SphereTarget],

@@ -320,6 +320,43 @@ impl CalibrationConfig {
             ..Self::default()
         }
     }
+
+    /// Every weight, threshold and the damping finite and non-negative, the radius bounds
+    /// ordered and the along-ray gate positive: a configuration file's typo is named here
+    /// instead of turning into a silently wrong shape.
+    pub fn validate(&self) -> Result<(), CalibrationError> {
+        let values = [
+            ("d2m", self.d2m),
+            ("m2d", self.m2d),
+            ("robust", self.robust),
+            ("m2d_robust", self.m2d_robust),
+            ("valid", self.valid),
+            ("prior_rotation", self.prior_rotation),
+            ("prior_beta", self.prior_beta),
+            ("prior_free", self.prior_free),
+            ("prior_free_joint", self.prior_free_joint),
+            ("ray_gate_noise", self.ray_gate_noise),
+            ("limits", self.limits),
+            ("lambda", self.lambda),
+            ("tolerance", self.tolerance),
+        ];
+        let bad = |reason: String| Err(CalibrationError::Input(reason));
+        if let Some((name, v)) = values.iter().find(|(_, v)| !(v.is_finite() && *v >= 0.0)) {
+            return bad(format!("{name} = {v}: must be finite and non-negative"));
+        }
+        let [lo, hi] = self.radius_limits;
+        if !(lo.is_finite() && hi.is_finite() && 0.0 <= lo && lo < hi) {
+            return bad(format!(
+                "radius_limits = [{lo}, {hi}]: need 0 ≤ lower < upper, finite"
+            ));
+        }
+        match self.ray_gate {
+            Some(g) if !(g.is_finite() && g > 0.0) => {
+                bad(format!("ray_gate = {g}: must be finite and positive"))
+            }
+            _ => Ok(()),
+        }
+    }
 }
 
 /// The stages of a calibration.
@@ -867,6 +904,7 @@ pub fn calibrate(
     config: &CalibrationConfig,
 ) -> Result<Calibration, CalibrationError> {
     let start = Instant::now();
+    config.validate()?;
     let too_few = config.fit_shape && frames.len() < 2;
     if frames.is_empty() || too_few || frames.len() != poses.len() {
         return Err(CalibrationError::Input(format!(
