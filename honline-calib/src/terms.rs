@@ -471,11 +471,14 @@ impl IekfPrior {
             active: layout.active.clone(),
         }
     }
+
+    /// The term's name in solver reports and track records.
+    pub const NAME: &'static str = "iekf";
 }
 
 impl EnergyTerm<OnlineCtx> for IekfPrior {
     fn name(&self) -> &'static str {
-        "iekf"
+        Self::NAME
     }
     fn accumulate(
         &self,

@@ -238,3 +238,55 @@ fn absurd_settings_are_refused_with_their_name() {
     }
     assert!(OnlineCalibrator::new(&base, OnlineConfig::default(), None).is_ok());
 }
+
+/// The innovation gate (`OnlineConfig::innovation_gate`): after a settled start, a frame
+/// whose fingers jumped ahead of the tracked pose (what a mis-tracked frame is to the shape:
+/// data the estimate can only explain by stepping against its belief) is rejected — β stays
+/// where the previous frame left it and no information is added — where without the gate its
+/// step and information enter the estimate.
+#[test]
+fn a_frame_the_belief_cannot_explain_is_rejected() {
+    let base = default_right_hand();
+    let (_, truth) = subject(&base, 0.1, 3);
+    let camera = Camera::sr300_qvga();
+    let outlier = |gate: f64| {
+        let config = OnlineConfig {
+            innovation_gate: gate,
+            ..OnlineConfig::default()
+        };
+        let mut calib = OnlineCalibrator::new(&base, config, None).unwrap();
+        calib.set_pose(&pose(&truth, 0, true)).unwrap();
+        let mut before = None;
+        for k in 0..60 {
+            let frame = rendered_frame(&truth, &pose(&truth, k, true), &camera, 1500).unwrap();
+            before = Some(calib.track(&frame, k as u64, k as f64 / 30.0));
+        }
+        let before = before.unwrap();
+        // 15 frames of finger motion at once.
+        let frame = rendered_frame(&truth, &pose(&truth, 75, true), &camera, 1500).unwrap();
+        let after = calib.track(&frame, 60, 2.0);
+        let moved = before
+            .beta
+            .iter()
+            .zip(&after.beta)
+            .map(|(a, b)| (a - b).abs())
+            .fold(0.0, f64::max);
+        let gained: f64 = after
+            .certainty
+            .iter()
+            .zip(&before.certainty)
+            .map(|(a, b)| a - b)
+            .sum();
+        (after.record.flags.clone(), moved, gained)
+    };
+    let (flags, moved, gained) = outlier(OnlineConfig::default().innovation_gate);
+    assert_eq!(flags, ["shape_rejected"]);
+    assert_eq!(moved, 0.0);
+    assert!(gained.abs() < 1e-9, "information added: {gained}");
+    let (flags, moved, gained) = outlier(0.0);
+    assert!(flags.is_empty(), "{flags:?}");
+    assert!(
+        moved > 0.01 && gained > 0.0,
+        "without the gate: β moved {moved} mm, information {gained}"
+    );
+}
