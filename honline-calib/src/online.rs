@@ -347,8 +347,8 @@ pub struct OnlineCalibrator {
     cumulative: Vec<f64>,
     per_frame: Vec<f64>,
     scratch: InfoScratch,
-    /// E_iekf of the last [`INNOVATION_WINDOW`] solved frames (a ring), and a buffer for their
-    /// median.
+    /// E_iekf of the last [`INNOVATION_WINDOW`] accepted frames (a ring), and a buffer for
+    /// their median.
     innovations: Vec<f64>,
     innovation_next: usize,
     innovation_median: Vec<f64>,
@@ -406,8 +406,8 @@ impl OnlineCalibrator {
         })
     }
 
-    /// Record the solved frame's E_iekf and say whether [`OnlineConfig::innovation_gate`]
-    /// rejects its step.
+    /// Whether [`OnlineConfig::innovation_gate`] rejects the solved frame's step; an accepted
+    /// frame's E_iekf joins the window.
     fn innovation_rejects(&mut self) -> bool {
         if self.config.estimator != Estimator::Iekf || self.config.innovation_gate <= 0.0 {
             return false;
