@@ -33,9 +33,10 @@ use nalgebra::Vector3;
 use sensor_io::io::write_atomic;
 use sensor_io::preprocess::PreprocessedFrame;
 
+use crate::config::{read_config, read_config_over};
 use crate::methods::{ModelRenderer, SphereMeshRenderer};
 use crate::overlay;
-use crate::track::{for_each_frame, load_sphere_mesh, read_config};
+use crate::track::{for_each_frame, load_sphere_mesh};
 
 /// The calibration `hands calibrate` runs.
 #[derive(Copy, Clone, Debug, PartialEq, Eq, clap::ValueEnum)]
@@ -111,8 +112,9 @@ pub struct CalibrateArgs {
     #[arg(long)]
     pub report: Option<PathBuf>,
     /// Calibration settings (JSON of `CalibrationConfig` for `spheremesh`, of `OfflineConfig`
-    /// for the offline methods, whose `method` `--method` sets; missing fields keep their
-    /// defaults). A folder of scans without it uses `CalibrationConfig::clouds`.
+    /// for the offline methods, whose `method` `--method` sets; missing fields, nested ones
+    /// included, keep their defaults). A folder of scans lays it over
+    /// `CalibrationConfig::clouds`.
     #[arg(long)]
     pub config: Option<PathBuf>,
     /// Hand segmentation: auto, wristband, depth, presegmented.
@@ -436,12 +438,8 @@ fn run_scans(args: &CalibrateArgs, base: &SphereMeshTemplate, files: &[PathBuf])
         .iter()
         .map(|s| s.iter().map(|p| p / units).collect())
         .collect();
-    // Without a settings file, those for complete clouds; a file's missing fields keep the
-    // plain defaults.
-    let config = match args.config.as_deref() {
-        Some(path) => read_config(Some(path))?,
-        None => CalibrationConfig::clouds(),
-    };
+    // The settings for complete clouds, with a settings file's fields laid over them.
+    let config = read_config_over(args.config.as_deref(), CalibrationConfig::clouds())?;
     let run = calibrate_clouds(base, &mm, &CloudSearch::default(), &config)?;
     let init = &run.init;
     eprintln!(

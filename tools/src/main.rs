@@ -3,6 +3,7 @@
 mod bench;
 mod calibrate;
 mod compare;
+mod config;
 mod convert;
 mod demo;
 mod evaluate;

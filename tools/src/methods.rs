@@ -22,7 +22,7 @@ use hmodel_spheremesh::M2dMode;
 use honline_calib::{Estimator, OnlineConfig};
 use sensor_io::Camera;
 
-use crate::track::read_config;
+use crate::config::read_config;
 use crate::trackers::{CylinderTracker, FrameTracker, OnlineTracker, SphereMeshTracker};
 
 /// A tracking method as the commands see it.
@@ -54,7 +54,8 @@ pub trait MethodModel {
 /// Tracker settings common to the methods: the JSON config file, then the switches.
 #[derive(Clone, Debug)]
 pub struct TrackSettings {
-    /// Tracker settings as JSON (any subset of the method's tracker config).
+    /// Tracker settings as JSON (any subset of the method's tracker config, at any depth; the
+    /// rest keep the method's defaults).
     pub config: Option<PathBuf>,
     /// Front-facing correspondences (Fig. 2.6, 3.9).
     pub front_facing: bool,

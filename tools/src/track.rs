@@ -17,7 +17,6 @@ use sensor_io::preprocess::{
     DepthOnlyParams, PreprocessConfig, PreprocessedFrame, Preprocessor, Segmentation,
     WristbandParams,
 };
-use serde::de::DeserializeOwned;
 
 use crate::methods::{CylinderMethodModel, Cylinders, Method, MethodModel, TrackSettings};
 use crate::trackers::FrameTracker;
@@ -55,8 +54,9 @@ pub struct TrackArgs {
     /// tinted blue, sensor points colored by their model distance (green 0 mm → red ≥ 10 mm).
     #[arg(long)]
     pub overlay: Option<PathBuf>,
-    /// Tracker settings as JSON (any subset of the chosen tracker's fields; the flags below
-    /// override it).
+    /// Tracker settings as JSON (any subset of the chosen tracker's fields, at any depth: the
+    /// rest keep that tracker's defaults, the online calibrator's schedule included; the flags
+    /// below override it).
     #[arg(long)]
     pub config: Option<PathBuf>,
     /// PCA pose prior: `project` (the project's own, embedded), a prior `.json` (`hands prior
@@ -239,18 +239,6 @@ fn load_prior(spec: &str) -> Result<Option<PcaPrior>> {
         other => {
             bail!("unknown --prior `{other}`: use project, a .json file, htrack:<dir> or none")
         }
-    }
-}
-
-/// Tracker settings from `--config` (any subset of the fields), or the defaults.
-pub(crate) fn read_config<T: DeserializeOwned + Default>(path: Option<&Path>) -> Result<T> {
-    match path {
-        Some(p) => {
-            let text =
-                std::fs::read_to_string(p).with_context(|| format!("reading {}", p.display()))?;
-            serde_json::from_str(&text).with_context(|| format!("parsing {}", p.display()))
-        }
-        None => Ok(T::default()),
     }
 }
 
