@@ -9,7 +9,9 @@ use hand_model::query::{Coherence, Projection, SphereMeshGeometry, View};
 use hand_model::render::raycast::{cast_ray_prepared, Ray};
 use hand_model::render::{DepthRenderer, Intrinsics, PixelHit, PixelRuns, PreparedElement};
 use hand_model::shape::Element;
-use hand_model::solver::{IrlsParams, IterInfo, LmCallback, PoseContext, TermError};
+use hand_model::solver::{
+    FrameStats, IrlsParams, IterInfo, LmCallback, LossParams, PoseContext, TermError,
+};
 use hand_model::spheremesh::{PosedSphereMesh, SphereMeshTemplate};
 use hand_model::ModelError;
 use nalgebra::{Vector2, Vector3};
@@ -312,6 +314,34 @@ impl<'m> TrackingCtx<'m> {
             Some(M2dMode::Render) => f64::from(self.m2d_stride * self.m2d_stride),
             _ => 1.0,
         }
+    }
+
+    /// How the last update fits the frame (loss detection, thesis §3.6): the points' distances
+    /// to their correspondences (`|r|`; none: unexplained) and the model's area outside the
+    /// sensor silhouette ([`TrackingCtx::outside_fraction`], where measured).
+    pub fn frame_stats(&self, params: &LossParams) -> FrameStats {
+        let d = self
+            .residuals
+            .iter()
+            .zip(&self.correspondences)
+            .map(|(r, c)| c.map(|_| r.abs()));
+        let stats = FrameStats::from_distances(d, params);
+        match self.outside_fraction() {
+            Some(outside) => stats.with_outside(outside),
+            None => stats,
+        }
+    }
+
+    /// The model's area outside the sensor silhouette over the silhouette's area, at the last
+    /// update: the m2d pushes (Eq. 3.5: rendered model pixels outside `S_s`, each standing for
+    /// [`TrackingCtx::m2d_pixel_weight`] pixels) over the silhouette's pixels. `None` without
+    /// the rendered m2d or without a silhouette.
+    pub fn outside_fraction(&self) -> Option<f64> {
+        if self.m2d != Some(M2dMode::Render) {
+            return None;
+        }
+        let area = self.sensor.silhouette_area();
+        (area > 0).then(|| self.pushes.len() as f64 * self.m2d_pixel_weight() / area as f64)
     }
 
     /// Front-facing correspondences (Fig. 3.9, default) or plain closest points (Eq. 3.6).

@@ -250,13 +250,7 @@ impl TrackingProblem for Problem<'_> {
     }
 
     fn frame_stats(&self, params: &LossParams) -> FrameStats {
-        let d = self
-            .ctx
-            .residuals()
-            .iter()
-            .zip(self.ctx.correspondences())
-            .map(|(r, c)| c.map(|_| r.abs()));
-        FrameStats::from_distances(d, params)
+        self.ctx.frame_stats(params)
     }
 
     fn hypotheses(&self) -> Vec<Pose> {
@@ -415,6 +409,8 @@ impl<'m> Tracker<'m> {
             );
             rec.energies
                 .insert("mean_distance_mm".into(), stats.mean_distance);
+            rec.energies
+                .insert("outside_fraction".into(), stats.outside);
         }
         let pose = &self.frames.pose;
         self.posed.update(self.template, pose);

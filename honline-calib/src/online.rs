@@ -6,8 +6,8 @@ use std::time::Instant;
 use hand_model::kinematics::Pose;
 use hand_model::solver::terms::Temporal;
 use hand_model::solver::{
-    sphere_mesh_points, EnergyTerm, IterInfo, LmCallback, LmError, LmSolver, LmWorkspace,
-    NormalEquations, PcaPrior, TermError,
+    sphere_mesh_points, EnergyTerm, FrameStats, IterInfo, LmCallback, LmError, LmSolver,
+    LmWorkspace, NormalEquations, PcaPrior, TermError,
 };
 use hand_model::spheremesh::{PosedSphereMesh, ShapeBasis, SphereMeshTemplate};
 use hand_model::ModelError;
@@ -112,12 +112,12 @@ pub struct OnlineConfig {
     /// Innovation gate of the joint estimator (beyond the thesis; 0 turns it off; default 6):
     /// a frame whose E_iekf after the solve (Eq. 4.11, the belief's Mahalanobis penalty on the
     /// step β took) exceeds this multiple of the median E_iekf of the last
-    /// [`INNOVATION_WINDOW`] accepted frames keeps the previous β and adds no information
+    /// 60 accepted frames keeps the previous β and adds no information
     /// (flag `shape_rejected`); its pose is kept. A mis-tracked frame (fingers crossing or
     /// hidden, a pose the LM did not reach) otherwise fits the shape to the wrong pose: on the
     /// ToF `crossing` sequence without the noise-scaled prior, E_iekf rose to 30× its median
     /// over frames 63–73 while the thumb's proximal phalanx went 17 mm short. After
-    /// [`INNOVATION_WINDOW`] rejections in a row the next frame is accepted, so a lasting
+    /// 60 rejections in a row the next frame is accepted, so a lasting
     /// change of the data is not refused forever. Measured (`hands track --calibrate online`,
     /// the library's 240-frame sequences, mean keypoint error, gate off → 6):
     /// - noise-free: teaser 0.42 → 0.47 mm, fist 1.79 → 1.00, occlusion 1.31 → 1.01, pinch
@@ -354,6 +354,8 @@ pub struct OnlineCalibrator {
     innovation_median: Vec<f64>,
     /// Frames rejected in a row.
     innovation_rejected: usize,
+    /// Frames failed in a row by the loss criterion ([`OnlineCalibrator::note_loss`]).
+    failed_run: usize,
 }
 
 impl OnlineCalibrator {
@@ -398,12 +400,30 @@ impl OnlineCalibrator {
             innovation_next: 0,
             innovation_median: Vec::with_capacity(INNOVATION_WINDOW),
             innovation_rejected: 0,
+            failed_run: 0,
             ctx,
             solver,
             ws,
             config,
             problem,
         })
+    }
+
+    /// Whether the solved frame failed by the tracker's loss criterion (`fit`,
+    /// [`hmodel_spheremesh::TrackerConfig::loss`]): a mis-tracked frame, whose shape step is
+    /// refused like the innovation gate's (flag `lost`). After `loss.window` failed frames in a
+    /// row the next frame is placed again ([`OnlineCalibrator::is_placed`]).
+    fn note_loss(&mut self, fit: &FrameStats) -> bool {
+        if !fit.failed {
+            self.failed_run = 0;
+            return false;
+        }
+        self.failed_run += 1;
+        if self.failed_run >= self.config.tracker.loss.window.max(1) {
+            self.initialized = false;
+            self.failed_run = 0;
+        }
+        true
     }
 
     /// Whether [`OnlineConfig::innovation_gate`] rejects the solved frame's step; an accepted
@@ -469,6 +489,15 @@ impl OnlineCalibrator {
         &self.pose
     }
 
+    /// Whether the next frame is solved from [`OnlineCalibrator::pose`]; false at the start
+    /// and after `tracker.loss.window` failed frames in a row: the next frame then places the
+    /// PCA mean pose on its points, unless a caller places the hand first
+    /// ([`OnlineCalibrator::set_pose`], e.g. from the Ch. 3 tracker's re-initialization
+    /// hypotheses, as `hands track` does; it also does so after a frame without a hand).
+    pub fn is_placed(&self) -> bool {
+        self.initialized
+    }
+
     /// The template at the current β of the tracking model.
     pub fn template(&self) -> &SphereMeshTemplate {
         self.ctx.tracking.template()
@@ -490,6 +519,7 @@ impl OnlineCalibrator {
     pub fn set_pose(&mut self, pose: &Pose) -> Result<(), OnlineError> {
         self.pose = Pose::from_values(&self.problem.base.skeleton, pose.values.clone())?;
         self.initialized = true;
+        self.failed_run = 0;
         self.temporal.clear_history();
         Ok(())
     }
@@ -618,6 +648,7 @@ impl OnlineCalibrator {
             .iter()
             .filter(|p| p.iter().all(|v| v.is_finite()));
         let mut reshape_us = 0.0;
+        let mut stats = None;
         if finite_points.count() >= self.config.min_points.max(1) {
             self.ctx.tracking.set_frame(frame);
             self.update_noise(frame);
@@ -680,12 +711,16 @@ impl OnlineCalibrator {
                         info,
                     );
                 self.problem.data.capture_next(false);
-                let rejected = measured && self.innovation_rejects();
+                let fit = self.ctx.tracking.frame_stats(&self.config.tracker.loss);
+                let lost = measured && self.note_loss(&fit);
+                let rejected = measured && (lost || self.innovation_rejects());
                 if rejected {
                     (self.ctx.beta, self.ctx.latent) = saved.clone();
                     self.ctx.dirty = true;
-                    rec.flags.push("shape_rejected".into());
+                    rec.flags
+                        .push(if lost { "lost" } else { "shape_rejected" }.into());
                 }
+                stats = Some(fit);
                 if !measured {
                     self.frame_info.fill(0.0);
                 } else {
@@ -708,6 +743,11 @@ impl OnlineCalibrator {
             if solved {
                 rec.iterations = Some(self.ws.report().iterations as u32);
                 rec.add_energies(self.ws.report().terms.iter().map(|t| (t.name, t.energy)));
+                if let Some(fit) = &stats {
+                    rec.energies
+                        .insert("mean_distance_mm".into(), fit.mean_distance);
+                    rec.energies.insert("outside_fraction".into(), fit.outside);
+                }
                 let posed = PosedSphereMesh::new(self.ctx.tracking.template(), &self.pose);
                 if self.config.tracker.enabled.temporal {
                     let _ = self.temporal.push_frame(&posed.skeleton);

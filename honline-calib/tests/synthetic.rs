@@ -290,3 +290,41 @@ fn a_frame_the_belief_cannot_explain_is_rejected() {
         "without the gate: β moved {moved} mm, information {gained}"
     );
 }
+
+/// A frame the tracker loses (its pose 400 mm off the hand, beyond the solve's reach) is
+/// flagged `lost` and leaves the shape and its information alone; after the loss window the
+/// calibrator asks to be placed again, and placing it on the hand tracks again.
+#[test]
+fn lost_frames_leave_the_shape_and_ask_for_placement() {
+    let base = default_right_hand();
+    let (_, truth) = subject(&base, 0.1, 3);
+    let camera = Camera::sr300_qvga();
+    let mut calib = OnlineCalibrator::new(&base, OnlineConfig::default(), None).unwrap();
+    let mut off = pose(&truth, 0, true);
+    let tx = base.skeleton.dof_index("global_tx").unwrap();
+    off.values[tx] += 400.0;
+    calib.set_pose(&off).unwrap();
+    let window = calib.config().tracker.loss.window;
+    let frame = rendered_frame(&truth, &pose(&truth, 0, true), &camera, 1500).unwrap();
+    let start = calib.track(&PreprocessedFrame::default(), 0, 0.0);
+    for k in 1..=window {
+        assert!(calib.is_placed(), "frame {k}");
+        let out = calib.track(&frame, k as u64, 0.0);
+        assert_eq!(out.record.flags, ["lost"], "frame {k}");
+        assert_eq!(out.beta, start.beta);
+        assert_eq!(out.certainty, start.certainty);
+        assert!(out.record.energies["mean_distance_mm"] > 6.0);
+    }
+    assert!(
+        !calib.is_placed(),
+        "placement asked after {window} lost frames"
+    );
+    calib.set_pose(&pose(&truth, 0, true)).unwrap();
+    let out = calib.track(&frame, window as u64 + 1, 0.0);
+    assert!(
+        out.solved && out.record.flags.is_empty(),
+        "{:?}",
+        out.record.flags
+    );
+    assert!(out.record.energies["mean_distance_mm"] < 1.0);
+}

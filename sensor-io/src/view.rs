@@ -60,6 +60,16 @@ impl SensorView {
         })
     }
 
+    /// Number of pixels of the sensor silhouette `S_s` (0 before the first frame): one pass
+    /// over the image.
+    pub fn silhouette_area(&self) -> usize {
+        self.nearest
+            .iter()
+            .enumerate()
+            .filter(|&(i, &n)| n as usize == i)
+            .count()
+    }
+
     /// The nearest silhouette pixel `(u, v)` of pixel `(u, v)`, `None` outside the image or
     /// when the silhouette is empty.
     #[inline]

@@ -89,10 +89,15 @@ impl FrameTracker for SphereMeshTracker<'_> {
 /// the current estimate.
 pub struct OnlineTracker<'m> {
     calib: OnlineCalibrator,
-    /// The Ch. 3 tracker of the starting template, until it has placed the first hand: its
-    /// placement hypotheses give the calibrator's first pose (the calibrator itself only
-    /// places the PCA mean pose on the points).
+    /// The Ch. 3 tracker of the starting template, until it has placed the hand: its
+    /// re-initialization hypotheses give the calibrator's pose whenever the calibrator is not
+    /// placed (the first frame, after a frame without a hand or a lost run; the calibrator
+    /// itself only places the PCA mean pose on the points).
     seed: Option<hmodel_spheremesh::Tracker<'m>>,
+    template: &'m SphereMeshTemplate,
+    prior: Option<&'m PcaPrior>,
+    /// Whether the last frame had no hand.
+    hand_left: bool,
     view: ShapedRenderer<'m>,
     /// The last frame's estimate β̂ and its certainty (full basis order), and the frame count.
     last: Option<(Vec<f64>, Vec<f64>)>,
@@ -105,12 +110,14 @@ impl<'m> OnlineTracker<'m> {
         template: &'m SphereMeshTemplate,
         basis: &'m ShapeBasis,
         config: OnlineConfig,
-        prior: Option<&PcaPrior>,
+        prior: Option<&'m PcaPrior>,
     ) -> Result<Self> {
-        let seed = hmodel_spheremesh::Tracker::new(template, config.tracker.clone(), prior)?;
         Ok(Self {
             calib: OnlineCalibrator::new(template, config, prior)?,
-            seed: Some(seed),
+            seed: None,
+            template,
+            prior,
+            hand_left: false,
             view: ShapedRenderer::new(template, basis),
             last: None,
             frames: 0,
@@ -120,6 +127,10 @@ impl<'m> OnlineTracker<'m> {
 
 impl FrameTracker for OnlineTracker<'_> {
     fn track(&mut self, frame: &PreprocessedFrame, index: u64, timestamp: f64) -> HandRecord {
+        if self.seed.is_none() && (!self.calib.is_placed() || self.hand_left) {
+            let config = self.calib.config().tracker.clone();
+            self.seed = hmodel_spheremesh::Tracker::new(self.template, config, self.prior).ok();
+        }
         if let Some(seed) = self.seed.as_mut() {
             let rec = seed.track(frame, index, timestamp);
             let placed = !rec
@@ -131,6 +142,9 @@ impl FrameTracker for OnlineTracker<'_> {
             }
         }
         let out = self.calib.track(frame, index, timestamp);
+        // As the Ch. 3 tracker: a hand that comes back after a frame without one is placed
+        // again rather than solved from the pose it left at.
+        self.hand_left = out.record.flags.iter().any(|f| f == "no_hand");
         // The calibrator only outputs shapes the basis accepts; were one refused, the view
         // would keep the previous shape.
         let _ = self.view.set_beta(&out.beta);

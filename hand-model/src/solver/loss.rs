@@ -48,6 +48,11 @@ pub struct FrameStats {
     pub mean_distance: f64,
     /// Fraction of sensor points farther than [`LossParams::unexplained_distance`].
     pub unexplained: f64,
+    /// The model's area outside the sensor silhouette over the silhouette's area (0 where the
+    /// tracker does not measure it): what the point distances cannot see — a model that covers
+    /// every point and sticks out of the silhouette (with 100 points, the hand turned upside
+    /// down over its palm explained them within 6 mm).
+    pub outside: f64,
     /// Whether the frame failed by [`LossParams`].
     pub failed: bool,
 }
@@ -73,14 +78,29 @@ impl FrameStats {
         Self {
             mean_distance: if mean.is_finite() { mean } else { 1e9 },
             unexplained,
+            outside: 0.0,
             failed: !(mean <= p.max_mean_distance && unexplained <= p.max_unexplained),
         }
     }
 
+    /// These statistics with the model's area outside the sensor silhouette, as a fraction of
+    /// the silhouette's area ([`FrameStats::outside`], non-finite or negative: counted as 1).
+    /// It ranks re-initialization hypotheses ([`FrameStats::score`]) but does not fail a frame:
+    /// tracked library sequences left up to 0.21 outside (a template thicker than the hand,
+    /// structured-light silhouettes), a hand turned upside down over sparse points 0.1.
+    pub fn with_outside(mut self, outside: f64) -> Self {
+        self.outside = if outside >= 0.0 && outside.is_finite() {
+            outside
+        } else {
+            1.0
+        };
+        self
+    }
+
     /// Score of a fitted hypothesis (lower is better): mean distance plus a penalty per
-    /// unexplained point.
+    /// unexplained point and per share of model area outside the silhouette.
     pub fn score(&self) -> f64 {
-        self.mean_distance + 100.0 * self.unexplained
+        self.mean_distance + 100.0 * (self.unexplained + self.outside)
     }
 }
 
