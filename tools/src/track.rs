@@ -433,7 +433,9 @@ fn track_sequence(args: &TrackArgs, tracker: &mut dyn FrameTracker) -> Result<()
         .into_iter()
         .map(|(k, v)| format!("{k} {:.0}", median(&v)))
         .collect();
-    eprintln!("median µs per frame: {}", stages.join(", "));
+    if !stages.is_empty() {
+        eprintln!("median µs per frame: {}", stages.join(", "));
+    }
     if !flags.is_empty() {
         let f: Vec<String> = flags.iter().map(|(k, v)| format!("{k} {v}")).collect();
         eprintln!("flagged frames: {}", f.join(", "));
