@@ -92,7 +92,8 @@ pub struct OnlineTracker<'m> {
     /// The Ch. 3 tracker of the starting template, until it has placed the hand: its
     /// re-initialization hypotheses give the calibrator's pose whenever the calibrator is not
     /// placed (the first frame, after a frame without a hand or a lost run; the calibrator
-    /// itself only places the PCA mean pose on the points).
+    /// itself only places the PCA mean pose on the points, which is also what happens should
+    /// the seed fail to build).
     seed: Option<hmodel_spheremesh::Tracker<'m>>,
     template: &'m SphereMeshTemplate,
     prior: Option<&'m PcaPrior>,
