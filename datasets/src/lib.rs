@@ -31,6 +31,7 @@ pub mod animbank;
 pub mod dexter;
 pub mod error;
 pub mod handy;
+pub mod mesh;
 pub mod motion;
 pub mod noise;
 pub mod nyu;

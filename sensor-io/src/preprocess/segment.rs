@@ -143,6 +143,12 @@ const MAX_STEP_FACTOR: f64 = 4.0;
 /// cut the hand, and the growth is repeated in the volume centered on the palm.
 const HAND_REACH_MM: f64 = 150.0;
 
+/// Length (mm) of the end of the principal axis taken as a forearm stump.
+const STUMP_MM: f64 = 40.0;
+/// An end whose widest inscribed circle is below this fraction of the other end's is fingers,
+/// never a forearm stump (a forearm is 50–70 mm across, a finger 15–20 mm).
+const THIN_END_RATIO: f64 = 0.6;
+
 /// Largest depth step (mm) across an occluding contour inside the hand (a finger in front of
 /// another, the thumb across the palm); the background and the body lie farther behind.
 const OCCLUSION_STEP_MM: f64 = 80.0;
@@ -219,9 +225,11 @@ fn find_seed(depth: &DepthImage, near: u16, far: u16) -> Option<usize> {
 ///    the view or the volume (the forearm continues to the elbow and body on real data);
 /// 2. geodesic distances inside the component from the exits (8-connected, in mm at each
 ///    pixel's depth), so that the far end of the component is the hand whatever the wrist
-///    bend, rotation or fist; without exits, the end of the principal axis whose last 40 mm
-///    hold the wider inscribed circle is taken as the forearm stump when the component is
-///    longer than `max_hand_length`, and otherwise the whole component is the hand;
+///    bend, rotation or fist; without exits, when the component is longer than
+///    `max_hand_length`, the last 40 mm of the principal axis at the end farther from the
+///    widest inscribed circle (the palm or the fist is wider than the forearm) are taken as the
+///    forearm stump — unless that end is the thinner one by far (fingers: a stump shorter than
+///    the fingers leaves the palm nearer to it), and otherwise the whole component is the hand;
 /// 3. palm center: the largest inscribed circle among pixels within `0.75 max_hand_length`
 ///    geodesically of the far end (excludes a foreshortened forearm near the exits);
 /// 4. forearm cut: the plane perpendicular to the palm→wrist direction (the palm to the
@@ -428,12 +436,32 @@ fn segment_pass(
             let widest = (0..pixels.len())
                 .max_by(|&a, &b| radius_mm(pixels[a]).total_cmp(&radius_mm(pixels[b])))
                 .unwrap_or(0);
-            let stump_hi = t[widest] - t_min < t_max - t[widest];
+            // The widest inscribed circle within the last 40 mm of each end.
+            let end_width = |hi: bool| {
+                pixels
+                    .iter()
+                    .zip(t.iter())
+                    .filter(|&(_, &x)| {
+                        if hi {
+                            x > t_max - STUMP_MM
+                        } else {
+                            x < t_min + STUMP_MM
+                        }
+                    })
+                    .map(|(&i, _)| radius_mm(i))
+                    .fold(0.0, f64::max)
+            };
+            let mut stump_hi = t[widest] - t_min < t_max - t[widest];
+            // A short stump leaves the palm nearer to it than to the fingertips: the end
+            // farther from the palm is then the fingers, far thinner than a forearm.
+            if end_width(stump_hi) < THIN_END_RATIO * end_width(!stump_hi) {
+                stump_hi = !stump_hi;
+            }
             exits.extend(pixels.iter().zip(t.iter()).filter_map(|(&i, &x)| {
                 let stump = if stump_hi {
-                    x > t_max - 40.0
+                    x > t_max - STUMP_MM
                 } else {
-                    x < t_min + 40.0
+                    x < t_min + STUMP_MM
                 };
                 stump.then_some(i)
             }));
@@ -950,6 +978,58 @@ mod tests {
         // A circle near the hint that is too small loses to the largest.
         let near_second = Some(Vector3::new(50.0, 0.0, 400.0));
         assert_eq!(pick_palm(c.into_iter(), &pts, near_second), (4, 10.0));
+    }
+
+    /// A flat hand at 400 mm, fingers up: a palm disc (45 mm), four 16 × 95 mm fingers, and a
+    /// forearm stump 60 mm wide and 70 mm long, shorter than the fingers reach from the palm.
+    #[test]
+    fn a_short_forearm_stump_is_cut_and_the_fingers_kept() {
+        let camera = Camera::sr300_qvga();
+        let (w, h) = (camera.width, camera.height);
+        let z = 400.0;
+        let inside = |x: f64, y: f64| {
+            let palm = x * x + y * y < 45.0 * 45.0;
+            let finger = (y < -30.0 && y > -140.0)
+                && [-33.0, -11.0, 11.0, 33.0]
+                    .iter()
+                    .any(|&c| (x - c).abs() < 8.0);
+            let stump = y > 30.0 && y < 115.0 && x.abs() < 30.0;
+            palm || finger || stump
+        };
+        let mut depth = DepthImage::zeros(w, h);
+        for v in 0..h {
+            for u in 0..w {
+                let p = camera.backproject(u as f64, v as f64, z);
+                if inside(p.x, p.y) {
+                    depth.data[(v * w + u) as usize] = z as u16;
+                }
+            }
+        }
+        let (mut out, mut scratch) = (HandSegment::default(), SegmentScratch::default());
+        segment_depth_only(
+            &depth,
+            &camera,
+            &DepthOnlyParams::default(),
+            &mut out,
+            &mut scratch,
+        );
+        let pixel = |x: f64, y: f64| {
+            let q = camera.project(&Vector3::new(x, y, z));
+            (q.y.round() as u32 * w + q.x.round() as u32) as usize
+        };
+        for c in [-33.0, -11.0, 11.0, 33.0] {
+            assert_eq!(
+                out.mask.data[pixel(c, -135.0)],
+                1,
+                "fingertip at x = {c} kept"
+            );
+        }
+        assert_eq!(
+            out.mask.data[pixel(0.0, 110.0)],
+            0,
+            "the stump's end is cut"
+        );
+        assert_eq!(out.mask.data[pixel(0.0, 0.0)], 1);
     }
 
     #[test]
