@@ -24,7 +24,7 @@
 //! | 2 (open, spread) | 15.17 4.90 2.59 / 2.76 1.89 0.99 | 15.12 5.34 6.55 / 4.00 3.38 3.12 |
 //! | 3 | 10.09 8.85 9.49 / 2.52 1.40 0.88 | 9.81 9.02 6.85 / 3.58 2.78 2.71 |
 //! | 4 | 7.97 4.42 3.82 / 2.13 1.17 0.88 | 8.75 4.27 3.73 / 3.51 2.87 3.00 |
-//! | 5 (fist) | 48.81 10.29 47.60 / 2.77 2.19 1.93 | 49.00 14.96 37.27 / 3.70 3.26 2.98 |
+//! | 5 (fist) | 48.81 10.29 47.60 / 2.77 2.19 1.93 | 50.02 12.29 37.31 / 3.73 3.21 2.97 |
 //!
 //! This test found that the depth-only segmentation took the fingertips for the forearm stump
 //! when the visible forearm is shorter than the fingers (the scans end a few centimetres

@@ -145,8 +145,10 @@ const HAND_REACH_MM: f64 = 150.0;
 
 /// Length (mm) of the end of the principal axis taken as a forearm stump.
 const STUMP_MM: f64 = 40.0;
-/// An end whose widest inscribed circle is below this fraction of the other end's is fingers,
-/// never a forearm stump (a forearm is 50–70 mm across, a finger 15–20 mm).
+/// An end whose widest inscribed circle is below this radius (mm) and this fraction of the
+/// other end's is fingers, never a forearm stump: a forearm is 45–70 mm across, a finger
+/// 15–20 mm; the knuckle end of a fist, also wide, never passes.
+const THIN_END_MM: f64 = 15.0;
 const THIN_END_RATIO: f64 = 0.6;
 
 /// Largest depth step (mm) across an occluding contour inside the hand (a finger in front of
@@ -454,7 +456,8 @@ fn segment_pass(
             let mut stump_hi = t[widest] - t_min < t_max - t[widest];
             // A short stump leaves the palm nearer to it than to the fingertips: the end
             // farther from the palm is then the fingers, far thinner than a forearm.
-            if end_width(stump_hi) < THIN_END_RATIO * end_width(!stump_hi) {
+            let (far, near) = (end_width(stump_hi), end_width(!stump_hi));
+            if far < THIN_END_MM && far < THIN_END_RATIO * near {
                 stump_hi = !stump_hi;
             }
             exits.extend(pixels.iter().zip(t.iter()).filter_map(|(&i, &x)| {
