@@ -16,8 +16,9 @@ use std::path::Path;
 use nalgebra::Vector3;
 use sensor_io::Camera;
 
-use crate::error::{DatasetError, Result};
+use crate::error::Result;
 use crate::scans::parse_obj_points;
+use crate::text::{parse_error, read_text};
 
 /// Triangles closer to the camera than this (mm) are dropped rather than clipped: the scenes
 /// rendered here are hundreds of millimetres away.
@@ -45,11 +46,7 @@ impl TriangleMesh {
 /// Read the vertices and faces of an OBJ file ([`parse_obj_mesh`]).
 pub fn read_obj_mesh(path: impl AsRef<Path>) -> Result<TriangleMesh> {
     let path = path.as_ref();
-    let text = std::fs::read_to_string(path).map_err(|source| DatasetError::Io {
-        file: path.to_path_buf(),
-        source,
-    })?;
-    parse_obj_mesh(&text, path)
+    parse_obj_mesh(&read_text(path)?, path)
 }
 
 /// The mesh of OBJ text: `v` lines as [`parse_obj_points`] reads them, and `f` lines of three or
@@ -67,11 +64,7 @@ pub fn parse_obj_mesh(text: &str, source: &Path) -> Result<TriangleMesh> {
         match fields.next() {
             Some("v") => defined += 1,
             Some("f") => {
-                let err = |reason: String| DatasetError::Parse {
-                    file: source.to_path_buf(),
-                    line: Some(i + 1),
-                    reason,
-                };
+                let err = |reason: String| parse_error(source, Some(i + 1), reason);
                 let face = fields
                     .map(|token| face_index(token, defined, vertices.len()).map_err(&err))
                     .collect::<Result<Vec<u32>>>()?;
@@ -87,11 +80,7 @@ pub fn parse_obj_mesh(text: &str, source: &Path) -> Result<TriangleMesh> {
         }
     }
     if triangles.is_empty() {
-        return Err(DatasetError::Parse {
-            file: source.to_path_buf(),
-            line: None,
-            reason: "no faces (`f` lines)".into(),
-        });
+        return Err(parse_error(source, None, "no faces (`f` lines)"));
     }
     Ok(TriangleMesh {
         vertices,
@@ -217,6 +206,7 @@ fn edge(a: &nalgebra::Vector2<f64>, b: &nalgebra::Vector2<f64>, c: &nalgebra::Ve
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::error::DatasetError;
 
     fn camera() -> Camera {
         Camera::sr300_qvga()
