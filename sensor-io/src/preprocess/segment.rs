@@ -438,18 +438,20 @@ fn segment_pass(
             let widest = (0..pixels.len())
                 .max_by(|&a, &b| radius_mm(pixels[a]).total_cmp(&radius_mm(pixels[b])))
                 .unwrap_or(0);
-            // The widest inscribed circle within the last 40 mm of each end.
+            // Whether `x` along the axis lies in the last 40 mm of the high or the low end.
+            let at_end = |hi: bool, x: f64| {
+                if hi {
+                    x > t_max - STUMP_MM
+                } else {
+                    x < t_min + STUMP_MM
+                }
+            };
+            // The widest inscribed circle of each end.
             let end_width = |hi: bool| {
                 pixels
                     .iter()
                     .zip(t.iter())
-                    .filter(|&(_, &x)| {
-                        if hi {
-                            x > t_max - STUMP_MM
-                        } else {
-                            x < t_min + STUMP_MM
-                        }
-                    })
+                    .filter(|&(_, &x)| at_end(hi, x))
                     .map(|(&i, _)| radius_mm(i))
                     .fold(0.0, f64::max)
             };
@@ -460,14 +462,12 @@ fn segment_pass(
             if far < THIN_END_MM && far < THIN_END_RATIO * near {
                 stump_hi = !stump_hi;
             }
-            exits.extend(pixels.iter().zip(t.iter()).filter_map(|(&i, &x)| {
-                let stump = if stump_hi {
-                    x > t_max - STUMP_MM
-                } else {
-                    x < t_min + STUMP_MM
-                };
-                stump.then_some(i)
-            }));
+            exits.extend(
+                pixels
+                    .iter()
+                    .zip(t.iter())
+                    .filter_map(|(&i, &x)| at_end(stump_hi, x).then_some(i)),
+            );
         }
     }
     let palm_k;
