@@ -304,6 +304,59 @@ mod tests {
         assert!(out.depth.iter().all(|&d| d == 0.0));
     }
 
+    /// The default hand, meshed by `hand_model::render::extract_mesh` and drawn by this
+    /// rasterizer, against the same hand ray-cast analytically by `hand_model::render`: two
+    /// independent paths from one sphere-mesh to a depth image.
+    #[test]
+    fn a_meshed_sphere_mesh_has_the_ray_cast_depth() {
+        use hand_model::kinematics::Pose;
+        use hand_model::render::{extract_mesh, render_depth, Intrinsics, MeshOptions};
+        use hand_model::spheremesh::{default_right_hand, PosedSphereMesh};
+        let cam = camera();
+        let t = default_right_hand();
+        let mut pose = Pose::zeros(&t.skeleton);
+        pose.set(&t.skeleton, "global_tz", 400.0).unwrap();
+        pose.set(&t.skeleton, "index_pip_flex", 0.8).unwrap();
+        let posed = PosedSphereMesh::new(&t, &pose);
+        let elements: Vec<_> = t.elements.iter().map(|e| e.element).collect();
+        let intrinsics = Intrinsics {
+            fx: cam.fx,
+            fy: cam.fy,
+            cx: cam.cx,
+            cy: cam.cy,
+            width: cam.width,
+            height: cam.height,
+        };
+        let cast = render_depth(&intrinsics, &posed.spheres, &elements).unwrap();
+        let tri = extract_mesh(&posed.spheres, &elements, &MeshOptions { cell_mm: 0.5 }).unwrap();
+        let mesh = TriangleMesh {
+            vertices: tri
+                .positions
+                .iter()
+                .map(|p| Vector3::from(*p).cast())
+                .collect(),
+            triangles: tri.triangles,
+        };
+        let drawn = render_mesh_depth(&mesh, &cam);
+        let (mut both, mut either, mut diffs) = (0usize, 0usize, Vec::new());
+        for (&a, &b) in cast.depth.iter().zip(&drawn.depth) {
+            either += usize::from(a > 0.0 || b > 0.0);
+            if a > 0.0 && b > 0.0 {
+                both += 1;
+                diffs.push((a - b).abs());
+            }
+        }
+        diffs.sort_by(f32::total_cmp);
+        let (median, p95) = (diffs[diffs.len() / 2], diffs[diffs.len() * 95 / 100]);
+        let iou = both as f64 / either as f64;
+        println!("{both} pixels, IoU {iou:.4}, |Δz| median {median:.3} p95 {p95:.3} mm");
+        assert!(both > 3000, "{both} pixels");
+        assert!(
+            iou > 0.97 && median < 0.1 && p95 < 0.5,
+            "IoU {iou}, |Δz| median {median} p95 {p95}"
+        );
+    }
+
     #[test]
     fn obj_faces_with_every_reference_form() {
         let text = "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nvt 0 0\nf 1/1 2/1 3/1 4/1\nf -4//1 -3//1 -2//1\n# c\nf 1 3 4\n";
