@@ -352,7 +352,7 @@ mod tests {
         println!("{both} pixels, IoU {iou:.4}, |Δz| median {median:.3} p95 {p95:.3} mm");
         assert!(both > 3000, "{both} pixels");
         assert!(
-            iou > 0.97 && median < 0.1 && p95 < 0.5,
+            iou > 0.995 && median < 0.02 && p95 < 0.05,
             "IoU {iou}, |Δz| median {median} p95 {p95}"
         );
     }
