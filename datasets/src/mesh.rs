@@ -123,78 +123,75 @@ pub struct MeshDepth {
 /// closed surface the visible side is the outer one. Triangles with a vertex nearer than
 /// [`NEAR_MM`] or with a non-finite vertex are skipped.
 pub fn render_mesh_depth(mesh: &TriangleMesh, camera: &Camera) -> MeshDepth {
-    let (w, h) = (camera.width as usize, camera.height as usize);
+    let n = camera.width as usize * camera.height as usize;
     let mut out = MeshDepth {
-        depth: vec![0.0; w * h],
-        normals: vec![Vector3::zeros(); w * h],
+        depth: vec![0.0; n],
+        normals: vec![Vector3::zeros(); n],
     };
-    let mut zbuf = vec![f64::INFINITY; w * h];
     for tri in &mesh.triangles {
         let vertex = |k: usize| mesh.vertices.get(tri[k] as usize).copied();
-        let (Some(a), Some(b), Some(c)) = (vertex(0), vertex(1), vertex(2)) else {
-            continue;
-        };
-        let p = [a, b, c];
-        if p.iter()
-            .any(|v| v.iter().any(|x| !x.is_finite()) || v.z < NEAR_MM)
-        {
-            continue;
-        }
-        let mut n = (p[1] - p[0]).cross(&(p[2] - p[0]));
-        let norm = n.norm();
-        if norm == 0.0 {
-            continue;
-        }
-        if n.dot(&p[0]) > 0.0 {
-            n = -n;
-        }
-        let normal = (n / norm).cast::<f32>();
-        let uv = p.map(|v| camera.project(&v));
-        let inv_z = [1.0 / p[0].z, 1.0 / p[1].z, 1.0 / p[2].z];
-        let area = edge(&uv[0], &uv[1], &uv[2]);
-        if area.abs() < 1e-12 {
-            continue;
-        }
-        let lo = |c: usize| {
-            uv.iter()
-                .map(|q| q[c])
-                .fold(f64::INFINITY, f64::min)
-                .ceil()
-                .max(0.0)
-        };
-        let hi = |c: usize, n: usize| {
-            uv.iter()
-                .map(|q| q[c])
-                .fold(f64::NEG_INFINITY, f64::max)
-                .floor()
-                .min(n as f64 - 1.0)
-        };
-        let (u0, u1, v0, v1) = (lo(0), hi(0, w), lo(1), hi(1, h));
-        if u0 > u1 || v0 > v1 {
-            continue;
-        }
-        for y in v0 as usize..=v1 as usize {
-            for x in u0 as usize..=u1 as usize {
-                let q = nalgebra::Vector2::new(x as f64, y as f64);
-                let l = [
-                    edge(&uv[1], &uv[2], &q) / area,
-                    edge(&uv[2], &uv[0], &q) / area,
-                    edge(&uv[0], &uv[1], &q) / area,
-                ];
-                if l.iter().any(|&x| x < 0.0) {
-                    continue;
-                }
-                let z = 1.0 / (l[0] * inv_z[0] + l[1] * inv_z[1] + l[2] * inv_z[2]);
-                let i = y * w + x;
-                if z < zbuf[i] {
-                    zbuf[i] = z;
-                    out.depth[i] = z as f32;
-                    out.normals[i] = normal;
-                }
-            }
+        if let (Some(a), Some(b), Some(c)) = (vertex(0), vertex(1), vertex(2)) {
+            draw_triangle([a, b, c], camera, &mut out);
         }
     }
     out
+}
+
+/// Z-buffer one triangle into `out` (the depth itself is the buffer: 0 is empty).
+fn draw_triangle(p: [Vector3<f64>; 3], camera: &Camera, out: &mut MeshDepth) {
+    if p.iter()
+        .any(|v| v.iter().any(|x| !x.is_finite()) || v.z < NEAR_MM)
+    {
+        return;
+    }
+    let mut n = (p[1] - p[0]).cross(&(p[2] - p[0]));
+    let norm = n.norm();
+    if norm == 0.0 {
+        return;
+    }
+    if n.dot(&p[0]) > 0.0 {
+        n = -n;
+    }
+    let normal = (n / norm).cast::<f32>();
+    let uv = p.map(|v| camera.project(&v));
+    let inv_z = p.map(|v| 1.0 / v.z);
+    let area = edge(&uv[0], &uv[1], &uv[2]);
+    if area.abs() < 1e-12 {
+        return;
+    }
+    // The pixel centers inside the triangle's bounding box, clamped to the image.
+    let range = |c: usize, size: u32| {
+        let (lo, hi) = uv
+            .iter()
+            .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), q| {
+                (lo.min(q[c]), hi.max(q[c]))
+            });
+        (lo.ceil().max(0.0), hi.floor().min(f64::from(size) - 1.0))
+    };
+    let ((u0, u1), (v0, v1)) = (range(0, camera.width), range(1, camera.height));
+    if u0 > u1 || v0 > v1 {
+        return;
+    }
+    let w = camera.width as usize;
+    for y in v0 as usize..=v1 as usize {
+        for x in u0 as usize..=u1 as usize {
+            let q = nalgebra::Vector2::new(x as f64, y as f64);
+            let l = [
+                edge(&uv[1], &uv[2], &q) / area,
+                edge(&uv[2], &uv[0], &q) / area,
+                edge(&uv[0], &uv[1], &q) / area,
+            ];
+            if l.iter().any(|&x| x < 0.0) {
+                continue;
+            }
+            let z = (1.0 / (l[0] * inv_z[0] + l[1] * inv_z[1] + l[2] * inv_z[2])) as f32;
+            let i = y * w + x;
+            if out.depth[i] == 0.0 || z < out.depth[i] {
+                out.depth[i] = z;
+                out.normals[i] = normal;
+            }
+        }
+    }
 }
 
 /// Twice the signed area of the triangle `a b c` in the image plane.
