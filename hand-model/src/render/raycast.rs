@@ -119,9 +119,9 @@ fn quadratic(a: f64, b: f64, c: f64) -> [Option<f64>; 2] {
     [Some(q / a), Some(c / q)]
 }
 
-/// Entry of the line `o + t·d` (unit `d`) into a ball: `(t, outward normal)`.
+/// Entry parameter `t` of the line `o + t·d` (unit `d`) into a ball.
 #[inline]
-fn ball_entry(s: &Sphere, o: &V3, d: &V3) -> Option<(f64, V3)> {
+fn ball_entry(s: &Sphere, o: &V3, d: &V3) -> Option<f64> {
     if s.radius.is_nan() || s.radius <= 0.0 {
         return None;
     }
@@ -132,11 +132,19 @@ fn ball_entry(s: &Sphere, o: &V3, d: &V3) -> Option<(f64, V3)> {
     if disc.is_nan() || disc < 0.0 {
         return None;
     }
-    let t = -b - disc.sqrt();
-    let n = o + d * t - s.center;
+    Some(-b - disc.sqrt())
+}
+
+/// The outward normal of a ball at the point `x` of its surface.
+#[inline]
+fn ball_normal(s: &Sphere, x: &V3, d: &V3) -> V3 {
+    let n = x - s.center;
     let len = n.norm();
-    let n = if len > 0.0 { n / len } else { -d };
-    Some((t, n))
+    if len > 0.0 {
+        n / len
+    } else {
+        -d
+    }
 }
 
 /// Whether the ray's segment `[t_min, t_best]` meets a (bounding) ball.
@@ -160,7 +168,11 @@ impl PreparedElement {
     /// on the element's boundary is it: the tangent triangles of a wedge and the cone band of a
     /// pill are boundary (each lies on a supporting plane), so a hit on them ends the search.
     /// Otherwise the entry is the smallest entering crossing over all primitives.
-    pub(crate) fn line_entry(&self, o: &V3, d: &V3) -> Option<(f64, V3)> {
+    ///
+    /// Every entering crossing comes at or after the entry, so crossings beyond `t_hi` are
+    /// skipped (their normals never worked out) and an entry beyond it is `None`: a ray that
+    /// already hit another element at `t_hi` needs no more.
+    pub(crate) fn line_entry(&self, o: &V3, d: &V3, t_hi: f64) -> Option<(f64, V3)> {
         if let Some(faces) = &self.faces {
             let c1 = self.spheres[0].center;
             for f in faces {
@@ -170,15 +182,15 @@ impl PreparedElement {
                 }
                 let t = (f.offset - f.normal.dot(o)) / denom;
                 if in_triangle(&f.skew(&c1, &(o + d * t))) {
-                    return Some((t, f.normal));
+                    return (t <= t_hi).then_some((t, f.normal));
                 }
             }
         }
         let mut best: Option<(f64, V3)> = None;
-        let keep = |best: &mut Option<(f64, V3)>, t: f64, n: V3| {
-            if best.is_none_or(|(bt, _)| t < bt) {
-                *best = Some((t, n));
-            }
+        // Whether a crossing at `t` can still be the entry.
+        let wins = |best: &Option<(f64, V3)>, t: f64| match best {
+            Some((bt, _)) => t < *bt,
+            None => t <= t_hi,
         };
         for cone in self.cones.iter().flatten() {
             let w = o - cone.apex_side;
@@ -192,12 +204,12 @@ impl PreparedElement {
             let c = k * radial0.norm_squared() - q0 * q0;
             for t in quadratic(a, b, c).into_iter().flatten() {
                 let s = s0 + t * ds;
-                if !(s >= cone.s_lo && s <= cone.s_hi) {
+                if !(s >= cone.s_lo && s <= cone.s_hi && wins(&best, t)) {
                     continue;
                 }
                 let n = cone.normal_at(&(o + d * t));
                 if n.dot(d) < 0.0 {
-                    keep(&mut best, t, n);
+                    best = Some((t, n));
                 }
             }
         }
@@ -205,8 +217,8 @@ impl PreparedElement {
             return best;
         }
         for s in self.spheres() {
-            if let Some((t, n)) = ball_entry(s, o, d) {
-                keep(&mut best, t, n);
+            if let Some(t) = ball_entry(s, o, d).filter(|&t| wins(&best, t)) {
+                best = Some((t, ball_normal(s, &(o + d * t), d)));
             }
         }
         best
@@ -231,7 +243,7 @@ impl PreparedElement {
         if !self.hull.meets(&ray.origin, &ray.dir, ray.t_min, t_best) {
             return None;
         }
-        let (t, normal) = self.line_entry(&ray.origin, &ray.dir)?;
+        let (t, normal) = self.line_entry(&ray.origin, &ray.dir, t_best)?;
         (t >= ray.t_min && t <= t_best).then(|| SurfaceHit {
             t,
             point: ray.at(t),
