@@ -3,6 +3,7 @@
 //! (thesis §3.3.1, Fig. 3.9) and IRLS weights, and the model→data push constraints of Eq. 3.5.
 
 use std::borrow::Cow;
+use std::time::Instant;
 
 use hand_model::kinematics::{Pose, PosedSkeleton, Skeleton};
 use hand_model::query::{Coherence, Projection, SphereMeshGeometry, View};
@@ -114,6 +115,33 @@ pub struct TrackingCtx<'m> {
     render_mask_valid: bool,
     hits: Vec<PixelHit>,
     pushes: Vec<SilhouettePush>,
+    timing: UpdateTiming,
+}
+
+/// Where [`TrackingCtx::update`] spends its time (µs, summed over the updates since the last
+/// [`TrackingCtx::take_timing`]): the parts of a tracker's "correspondences" stage, so that a
+/// benchmark can say which one a sensor's noise makes expensive.
+#[derive(Copy, Clone, Debug, Default, PartialEq)]
+pub struct UpdateTiming {
+    /// Re-posing the model and the (front-facing) closest points of the data points (Eq. 3.6,
+    /// §3.3.1, with the silhouette substitutes of back-facing footpoints).
+    pub closest_us: f64,
+    /// The along-ray registration ([`TrackingCtx::set_ray_gate`]): zero where it is off.
+    pub along_ray_us: f64,
+    /// The model-to-data pushes of Eq. 3.5 (rendering the model outside the sensor silhouette).
+    pub m2d_us: f64,
+}
+
+impl UpdateTiming {
+    /// The parts as `timing_us` stages of the DESIGN.md record (sub-stages of
+    /// `correspondences`).
+    pub fn stages(&self) -> [(&'static str, f64); 3] {
+        [
+            ("closest_points", self.closest_us),
+            ("along_ray", self.along_ray_us),
+            ("m2d", self.m2d_us),
+        ]
+    }
 }
 
 /// The default of [`TrackingCtx::set_ray_slide`] (mm): 7.5, as the cylinder tracker's (5 until
@@ -227,6 +255,7 @@ impl<'m> TrackingCtx<'m> {
             render_mask_valid: false,
             hits: Vec::new(),
             pushes: Vec::new(),
+            timing: UpdateTiming::default(),
         })
     }
 
@@ -394,6 +423,7 @@ impl<'m> TrackingCtx<'m> {
                 found: pose.values.len(),
             });
         }
+        let start = Instant::now();
         self.pose.values.clone_from(&pose.values);
         self.rigid_only = rigid_only;
         self.reweighted = self.irls.reweight && (!rigid_only || self.irls.reweight_rigid);
@@ -444,10 +474,21 @@ impl<'m> TrackingCtx<'m> {
                 1.0
             };
         }
+        let closest = Instant::now();
+        self.timing.closest_us += (closest - start).as_secs_f64() * 1e6;
         if let Some(gate) = self.ray_gate {
             self.register_along_rays(gate);
         }
-        self.update_pushes()
+        let along_ray = Instant::now();
+        self.timing.along_ray_us += (along_ray - closest).as_secs_f64() * 1e6;
+        let pushed = self.update_pushes();
+        self.timing.m2d_us += along_ray.elapsed().as_secs_f64() * 1e6;
+        pushed
+    }
+
+    /// The time [`TrackingCtx::update`] spent by part since the last call (then zeroed).
+    pub fn take_timing(&mut self) -> UpdateTiming {
+        std::mem::take(&mut self.timing)
     }
 
     /// [`TrackingCtx::set_ray_gate`]'s correspondences, over the closest points already found.

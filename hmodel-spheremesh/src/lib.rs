@@ -99,7 +99,8 @@ mod tests;
 mod tracker;
 
 pub use context::{
-    intrinsics, CorrespondenceCallback, M2dMode, SilhouettePush, TrackingCtx, DEFAULT_RAY_SLIDE,
+    intrinsics, CorrespondenceCallback, M2dMode, SilhouettePush, TrackingCtx, UpdateTiming,
+    DEFAULT_RAY_SLIDE,
 };
 pub use jacobian::{FootpointJacobian, MAX_ELEMENT_DOFS};
 pub use tracker::{EnabledTerms, FrontFacingView, Tracker, TrackerConfig, TrackerError};

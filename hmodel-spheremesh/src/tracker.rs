@@ -387,6 +387,7 @@ impl<'m> Tracker<'m> {
         let start = Instant::now();
         let mut rec = HandRecord::for_frame(index, timestamp);
         self.problem.timing = SolveTiming::default();
+        self.problem.ctx.take_timing();
         let n = frame.points.len();
         if n >= self.frames.loss().min_points.max(1) {
             self.problem.ctx.set_frame(frame);
@@ -428,6 +429,9 @@ impl<'m> Tracker<'m> {
 
         rec.timing_us
             .insert("correspondences".into(), self.problem.timing.callback_us);
+        for (stage, us) in self.problem.ctx.take_timing().stages() {
+            rec.timing_us.insert(stage.into(), us);
+        }
         rec.timing_us
             .insert("solve".into(), self.problem.timing.solve_us);
         rec.timing_us

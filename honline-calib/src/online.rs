@@ -640,6 +640,7 @@ impl OnlineCalibrator {
     pub fn track(&mut self, frame: &PreprocessedFrame, index: u64, timestamp: f64) -> OnlineFrame {
         let start = Instant::now();
         let mut rec = HandRecord::for_frame(index, timestamp);
+        self.ctx.tracking.take_timing();
         let k = self.problem.layout.active.len();
         self.frame_info.fill(0.0);
         let mut solved = false;
@@ -693,6 +694,9 @@ impl OnlineCalibrator {
             reshape_us += callback.reshape_us;
             rec.timing_us
                 .insert("correspondences".into(), callback.correspondences_us);
+            for (stage, us) in self.ctx.tracking.take_timing().stages() {
+                rec.timing_us.insert(stage.into(), us);
+            }
             rec.timing_us.insert(
                 "solve".into(),
                 lm_us - callback.correspondences_us - callback.reshape_us,

@@ -209,6 +209,10 @@ fn record(spec: SyntheticSpec, what: &str) -> Result<Recorded> {
 #[derive(Default)]
 struct Samples {
     correspondences: Vec<f64>,
+    /// The sphere-mesh trackers' parts of `correspondences` (NaN for the cylinders).
+    closest: Vec<f64>,
+    along_ray: Vec<f64>,
+    m2d: Vec<f64>,
     solve: Vec<f64>,
     /// The online calibrator's own stages (NaN for the trackers without them).
     reshape: Vec<f64>,
@@ -240,6 +244,9 @@ fn track_all(tracker: &mut dyn FrameTracker, seq: &Recorded, bar: &ProgressBar) 
         let rec = tracker.track(frame, truth.frame, truth.timestamp);
         let stage = |k: &str| rec.timing_us.get(k).copied().unwrap_or(f64::NAN);
         s.correspondences.push(stage("correspondences"));
+        s.closest.push(stage("closest_points"));
+        s.along_ray.push(stage("along_ray"));
+        s.m2d.push(stage("m2d"));
         s.solve.push(stage("solve"));
         s.reshape.push(stage("reshape"));
         s.laplace.push(stage("laplace"));
@@ -258,6 +265,14 @@ fn track_all(tracker: &mut dyn FrameTracker, seq: &Recorded, bar: &ProgressBar) 
 #[derive(Serialize, Clone, Copy)]
 struct Stages {
     correspondences_us: f64,
+    /// Sphere-mesh trackers only (absent for the cylinders): the parts of `correspondences`
+    /// (`hmodel_spheremesh::UpdateTiming`).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    closest_points_us: Option<f64>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    along_ray_us: Option<f64>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    m2d_us: Option<f64>,
     solve_us: f64,
     /// Online calibration only (absent for the plain trackers): the template and collision
     /// term rebuilt on a moved β.
@@ -301,6 +316,9 @@ fn stage_medians(s: &Samples, per_iteration: bool) -> Stages {
     let reported = |v: &[f64]| v.iter().any(|x| !x.is_nan()).then(|| m(v));
     Stages {
         correspondences_us: m(&s.correspondences),
+        closest_points_us: reported(&s.closest),
+        along_ray_us: reported(&s.along_ray),
+        m2d_us: reported(&s.m2d),
         solve_us: m(&s.solve),
         reshape_us: reported(&s.reshape),
         laplace_us: reported(&s.laplace),
@@ -539,12 +557,19 @@ type Unit = (&'static str, fn(&SingleThread) -> &Stages);
 
 /// The stages of a [`Stages`], in table order, with the thesis's figure for each (per
 /// iteration, per frame) where it quotes one.
-const STAGE_ROWS: [StageRow; 7] = [
+const STAGE_ROWS: [StageRow; 10] = [
     (
         "correspondences",
         |s| Some(s.correspondences_us),
         ["250 (+ rendering 500)", "front-facing 100, silhouette 150"],
     ),
+    (
+        "· closest points (front-facing)",
+        |s| s.closest_points_us,
+        ["250", "—"],
+    ),
+    ("· along-ray registration", |s| s.along_ray_us, ["—", "—"]),
+    ("· m2d (rendering)", |s| s.m2d_us, ["500", "—"]),
     ("solve", |s| Some(s.solve_us), ["—", "—"]),
     (
         "reshape (β → template, collision)",
@@ -629,7 +654,10 @@ fn single_thread_table(r: &Report) -> String {
     let _ = writeln!(
         t,
         "\ncorrespondences = the whole refresh before each solve (re-pose, closest points, \
-         front-facing test, silhouette candidates, m2d rendering / the E2D raster); the \
+         front-facing test, silhouette candidates, m2d rendering / the E2D raster), with the \
+         sphere-mesh trackers' parts of it (·): closest points with their front-facing \
+         substitutes, the along-ray registration (on frames whose measured depth noise is \
+         ≥ 1.5 mm), the m2d pushes; the \
          reshape, Laplace and filter rows are what online calibration adds (\"—\": the model \
          has no such stage); other = total minus the stages above; goals: 1500 µs (issue 5), \
          online 5000 µs = 200 frames/s (issue 8)"

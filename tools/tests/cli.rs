@@ -710,6 +710,22 @@ fn bench_writes_positive_medians_as_json() {
         assert!(positive(&s["frames_per_s"]) && positive(&s["ratio_to_baseline"]));
         assert!(positive(&s["ratio_to_spheremesh"]), "{s}");
         assert!(positive(&s["goal_us"]), "{s}");
+        // The parts of the correspondences: the sphere-mesh trackers' (the default ToF frames
+        // register along the rays), each within the whole.
+        let spheres = s["model"] != "cylinders";
+        for part in ["closest_points_us", "along_ray_us", "m2d_us"] {
+            let v = &s["per_frame"][part];
+            assert!(
+                if spheres { positive(v) } else { v.is_null() },
+                "{part}: {s}"
+            );
+            if spheres {
+                let whole = s["per_frame"]["correspondences_us"]
+                    .as_f64()
+                    .expect("whole");
+                assert!(v.as_f64().expect("part") <= whole, "{part}: {s}");
+            }
+        }
         // The calibration stages belong to the online calibrator alone.
         let online = s["model"] == "online";
         for stage in ["reshape_us", "laplace_us", "filter_us"] {

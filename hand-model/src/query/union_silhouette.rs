@@ -248,7 +248,9 @@ impl Nearest<'_> {
             if vp.n_visible == UNCLIPPED {
                 // Clipping costs tens of µs: not for a piece that cannot come nearer than the
                 // best so far (the margin covers rounding, so the answer is the same).
-                let lower = vp.piece.distance2_lower_bound(centers, radii, &self.basis, p);
+                let lower = vp
+                    .piece
+                    .distance2_lower_bound(centers, radii, &self.basis, p);
                 if lower * (1.0 - 1e-9) >= self.bound_d2 {
                     continue;
                 }
