@@ -381,4 +381,48 @@ mod tests {
             }
         }
     }
+
+    /// Every truncation of a valid file, and every byte of it replaced by a troublemaker (a
+    /// sign, a huge or non-numeric token, a separator, a line break, a multi-byte character):
+    /// an error, or a mesh whose triangles name existing vertices and whose rendering holds
+    /// finite depths only. Never a panic.
+    #[test]
+    fn corrupt_obj_text_is_an_error_or_a_valid_mesh() {
+        let good = "v -20 -20 300\nv 20 -20 300\nv -20 20 320\nv 20 20 1e2\nvt 0 1\n\
+                    f 1/1 2/1 3/1\nf -3//1 4 -2 # quad corner\n";
+        let camera = camera();
+        let check = |text: &str| match parse_obj_mesh(text, Path::new("<memory>")) {
+            Ok(mesh) => {
+                let n = mesh.vertices.len() as u32;
+                assert!(mesh.triangles.iter().flatten().all(|&i| i < n), "{text:?}");
+                let image = render_mesh_depth(&mesh, &camera);
+                assert!(image.depth.iter().all(|d| d.is_finite()), "{text:?}");
+            }
+            Err(e) => assert!(!e.to_string().is_empty()),
+        };
+        let mesh = parse_obj_mesh(good, Path::new("<memory>")).unwrap();
+        assert_eq!((mesh.vertices.len(), mesh.triangles.len()), (4, 2));
+        let seen = render_mesh_depth(&mesh, &camera).depth;
+        assert!(seen.iter().filter(|&&d| d > 0.0).count() > 100);
+        for n in 0..=good.len() {
+            check(&good[..n]);
+        }
+        for i in 0..good.len() {
+            for token in [
+                "",
+                "-",
+                "+",
+                "nan",
+                "inf",
+                "1e999",
+                "99999999999",
+                "/",
+                " ",
+                "\n",
+                "é",
+            ] {
+                check(&format!("{}{token}{}", &good[..i], &good[i + 1..]));
+            }
+        }
+    }
 }
