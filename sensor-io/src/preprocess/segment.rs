@@ -828,6 +828,8 @@ pub fn rgb_to_hsv(rgb: [u8; 3]) -> [u8; 3] {
 /// component, the depth slab around the band's mean depth, the forearm axis as the principal
 /// direction of slab points within 100 mm of the band center (oriented toward the hand), and the
 /// crop sphere ahead of the band. Band pixels themselves are excluded from the silhouette.
+/// A color image of another size than the depth image's (or an image whose buffer does not
+/// hold its size) finds no hand.
 pub fn segment_wristband(
     depth: &DepthImage,
     color: &ColorImage,
@@ -840,14 +842,34 @@ pub fn segment_wristband(
     out.count = 0;
     out.palm_center = None;
     out.wristband = None;
-    if color.width != depth.width || color.height != depth.height {
+    if color.width != depth.width
+        || color.height != depth.height
+        || color.data.len() != 3 * w * h
+        || depth.data.len() != w * h
+    {
         return;
     }
     let in_range = |v: u8, r: [u8; 2]| v >= r[0] && v <= r[1];
-    let band: Vec<bool> = (0..w * h)
-        .map(|i| {
-            let [hh, s, v] = rgb_to_hsv(color.get((i % w) as u32, (i / w) as u32));
-            in_range(hh, params.hue) && in_range(s, params.saturation) && in_range(v, params.value)
+    let is_band = |rgb: [u8; 3]| {
+        let [hh, s, v] = rgb_to_hsv(rgb);
+        in_range(hh, params.hue) && in_range(s, params.saturation) && in_range(v, params.value)
+    };
+    // Neighbouring pixels often share their color (flat regions, saturated areas): the test of
+    // the previous pixel is reused for an equal color rather than converted again.
+    let mut last = None;
+    let band: Vec<bool> = color
+        .data
+        .chunks_exact(3)
+        .map(|c| {
+            let rgb = [c[0], c[1], c[2]];
+            match last {
+                Some((previous, answer)) if previous == rgb => answer,
+                _ => {
+                    let answer = is_band(rgb);
+                    last = Some((rgb, answer));
+                    answer
+                }
+            }
         })
         .collect();
     // Largest 4-connected band component.
@@ -957,6 +979,56 @@ pub fn segment_wristband(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// An arm at 400 mm across the frame with a blue band around its middle, and its color
+    /// image.
+    fn banded_arm() -> (DepthImage, ColorImage) {
+        let camera = Camera::sr300_qvga();
+        let (w, h) = (camera.width, camera.height);
+        let mut depth = DepthImage::zeros(w, h);
+        let mut color = ColorImage::zeros(w, h);
+        for v in 100..140 {
+            for u in 40..280 {
+                depth.data[(v * w + u) as usize] = 400;
+                let rgb = if (150..165).contains(&u) {
+                    [30, 60, 200]
+                } else {
+                    [200, 150, 120]
+                };
+                let i = 3 * (v * w + u) as usize;
+                color.data[i..i + 3].copy_from_slice(&rgb);
+            }
+        }
+        (depth, color)
+    }
+
+    #[test]
+    fn the_band_is_found_and_a_color_buffer_of_the_wrong_size_finds_nothing() {
+        let camera = Camera::sr300_qvga();
+        let (depth, mut color) = banded_arm();
+        let mut out = HandSegment::default();
+        segment_wristband(
+            &depth,
+            &color,
+            &camera,
+            &WristbandParams::default(),
+            &mut out,
+        );
+        assert!(
+            out.wristband.is_some() && out.count > 0,
+            "{:?}",
+            out.wristband
+        );
+        color.data.truncate(color.data.len() - 3);
+        segment_wristband(
+            &depth,
+            &color,
+            &camera,
+            &WristbandParams::default(),
+            &mut out,
+        );
+        assert!(out.wristband.is_none() && out.count == 0);
+    }
 
     /// Five candidate circles along x: the largest at 100 mm, one of 0.8 of its radius at 0.
     fn candidates() -> (Vec<Vector3<f64>>, Vec<(usize, f64)>) {
