@@ -123,22 +123,38 @@ impl Piece {
                 let off_plane = (d.norm_squared() - planar).max(0.0);
                 (planar.sqrt() - radii[sphere as usize]).powi(2) + off_plane
             }
-            Piece::Segment {
-                spheres: [i, j],
-                normal,
-            } => {
-                let (i, j) = (i as usize, j as usize);
-                let a = centers[i] + normal * radii[i];
-                let ab = centers[j] + normal * radii[j] - a;
-                let ab2 = ab.norm_squared();
-                let t = if ab2 > 0.0 {
-                    ((p - a).dot(&ab) / ab2).clamp(0.0, 1.0)
-                } else {
-                    0.0
-                };
-                (p - a - ab * t).norm_squared()
+            Piece::Segment { .. } => {
+                let (a, ab, foot) = self.segment_foot(centers, radii, p).unwrap_or_default();
+                (p - a - ab * foot.clamp(0.0, 1.0)).norm_squared()
             }
         }
+    }
+
+    /// A segment piece's generator `x(t) = a + t·ab` as `(a, ab)` and the parameter `t` of the
+    /// foot of `p` on its line (unclamped; 0 for a degenerate segment); `None` for an arc.
+    pub(crate) fn segment_foot(
+        &self,
+        centers: &[Vector3<f64>],
+        radii: &[f64],
+        p: &Vector3<f64>,
+    ) -> Option<(Vector3<f64>, Vector3<f64>, f64)> {
+        let Piece::Segment {
+            spheres: [i, j],
+            normal,
+        } = *self
+        else {
+            return None;
+        };
+        let (i, j) = (i as usize, j as usize);
+        let a = centers[i] + normal * radii[i];
+        let ab = centers[j] + normal * radii[j] - a;
+        let ab2 = ab.norm_squared();
+        let foot = if ab2 > 0.0 {
+            (p - a).dot(&ab) / ab2
+        } else {
+            0.0
+        };
+        Some((a, ab, foot))
     }
 
     /// A ball `[x, y, z, R]` containing the piece.

@@ -266,19 +266,8 @@ impl Nearest<'_> {
                     let d = nearest_direction(spans, u);
                     Piece::arc_at_direction(sphere, centers, radii, &self.basis, &d)
                 }
-                Piece::Segment {
-                    spheres: [i, j],
-                    normal,
-                } => {
-                    let (i, j) = (i as usize, j as usize);
-                    let a = centers[i] + normal * radii[i];
-                    let ab = centers[j] + normal * radii[j] - a;
-                    let ab2 = ab.norm_squared();
-                    let foot = if ab2 > 0.0 {
-                        (p - a).dot(&ab) / ab2
-                    } else {
-                        0.0
-                    };
+                Piece::Segment { .. } => {
+                    let (_, _, foot) = vp.piece.segment_foot(centers, radii, p).unwrap_or_default();
                     let mut t = foot;
                     let mut gap = f64::INFINITY;
                     for s in spans {

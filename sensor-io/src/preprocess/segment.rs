@@ -1004,30 +1004,17 @@ mod tests {
 
     #[test]
     fn the_band_is_found_and_a_color_buffer_of_the_wrong_size_finds_nothing() {
-        let camera = Camera::sr300_qvga();
         let (depth, mut color) = banded_arm();
-        let mut out = HandSegment::default();
-        segment_wristband(
-            &depth,
-            &color,
-            &camera,
-            &WristbandParams::default(),
-            &mut out,
-        );
-        assert!(
-            out.wristband.is_some() && out.count > 0,
-            "{:?}",
-            out.wristband
-        );
+        let segment = |color: &ColorImage| {
+            let mut out = HandSegment::default();
+            let params = WristbandParams::default();
+            segment_wristband(&depth, color, &Camera::sr300_qvga(), &params, &mut out);
+            (out.wristband.is_some(), out.count)
+        };
+        let (band, count) = segment(&color);
+        assert!(band && count > 0, "band {band}, {count} px");
         color.data.truncate(color.data.len() - 3);
-        segment_wristband(
-            &depth,
-            &color,
-            &camera,
-            &WristbandParams::default(),
-            &mut out,
-        );
-        assert!(out.wristband.is_none() && out.count == 0);
+        assert_eq!(segment(&color), (false, 0));
     }
 
     /// Five candidate circles along x: the largest at 100 mm, one of 0.8 of its radius at 0.
