@@ -83,6 +83,9 @@ pub struct SegmentScratch {
     /// The palm center of the last segmented frame (a hint for the next frame's; cleared by
     /// a frame without a hand).
     last_palm: Option<Vector3<f64>>,
+    /// Where the last frame's forearm stump was taken (the centroid of its pixels) when its
+    /// arm had no exit (see [`segment_depth_only`], step 2).
+    last_stump: Option<Vector3<f64>>,
 }
 
 /// Parameters of the depth-only segmentation.
@@ -150,6 +153,9 @@ const STUMP_MM: f64 = 40.0;
 /// 15–20 mm; the knuckle end of a fist, also wide, never passes.
 const THIN_END_MM: f64 = 15.0;
 const THIN_END_RATIO: f64 = 0.6;
+/// How far (mm) a forearm stump's centroid moves between frames at most (an arm at 1 m/s in
+/// 30 Hz frames), for the stump's coherence from frame to frame.
+const STUMP_MM_PER_FRAME: f64 = 35.0;
 
 /// Largest depth step (mm) across an occluding contour inside the hand (a finger in front of
 /// another, the thumb across the palm); the background and the body lie farther behind.
@@ -231,7 +237,9 @@ fn find_seed(depth: &DepthImage, near: u16, far: u16) -> Option<usize> {
 ///    `max_hand_length`, the last 40 mm of the principal axis at the end farther from the
 ///    widest inscribed circle (the palm or the fist is wider than the forearm) are taken as the
 ///    forearm stump — unless that end is the thinner one by far (fingers: a stump shorter than
-///    the fingers leaves the palm nearer to it), and otherwise the whole component is the hand;
+///    the fingers leaves the palm nearer to it), or, when neither end is, unless the last
+///    frame's stump lay at the other end (a structured-light sensor's shadows across the palm
+///    left the forearm with the widest circle); otherwise the whole component is the hand;
 /// 3. palm center: the largest inscribed circle among pixels within `0.75 max_hand_length`
 ///    geodesically of the far end (excludes a foreshortened forearm near the exits);
 /// 4. forearm cut: the plane perpendicular to the palm→wrist direction (the palm to the
@@ -271,6 +279,7 @@ pub fn segment_depth_only(
     let Some(seed) = find_seed(depth, params.near, params.far) else {
         out.clear(depth);
         scratch.last_palm = None;
+        scratch.last_stump = None;
         return;
     };
     let mut growth = Growth {
@@ -329,6 +338,7 @@ fn segment_pass(
         geo,
         region,
         last_palm,
+        last_stump,
     } = scratch;
     let (w, h) = (depth.width as usize, depth.height as usize);
     out.clear(depth);
@@ -414,6 +424,7 @@ fn segment_pass(
     pts.clear();
     pts.extend(pixels.iter().map(|&i| point(depth, camera, i)));
     let extent = pts.iter().map(|p| (p - seed_p).norm()).fold(0.0, f64::max);
+    let had_stump = last_stump.take();
     if exits.is_empty() {
         // No exit: the whole arm part is in view and in range. Short: a hand alone; long: a
         // forearm stump, at the end of the principal axis farther from the widest inscribed
@@ -456,12 +467,24 @@ fn segment_pass(
                     .fold(0.0, f64::max)
             };
             let mut stump_hi = t[widest] - t_min < t_max - t[widest];
-            // A short stump leaves the palm nearer to it than to the fingertips: the end
-            // farther from the palm is then the fingers, far thinner than a forearm.
+            let thin = |far: f64, near: f64| far < THIN_END_MM && far < THIN_END_RATIO * near;
             let (far, near) = (end_width(stump_hi), end_width(!stump_hi));
-            if far < THIN_END_MM && far < THIN_END_RATIO * near {
+            let ends = [false, true].map(|hi| end_centroid(pts, t, at_end, hi));
+            let coherent =
+                had_stump.map(|last| ends.map(|c| (c - last).norm() <= STUMP_MM_PER_FRAME));
+            if thin(far, near) {
+                // A short stump leaves the palm nearer to it than to the fingertips: the end
+                // farther from the palm is then the fingers, far thinner than a forearm.
                 stump_hi = !stump_hi;
+            } else if thin(near, far) {
+                // The other end is the fingers: the widest circle chose well.
+            } else if let Some([lo, hi]) = coherent.filter(|[lo, hi]| lo != hi) {
+                // The palm and the forearm are about as wide (a structured-light sensor's
+                // shadows across the palm made the widest circle jump to the forearm): the arm
+                // moves little between frames, so the stump is the end where the last one was.
+                stump_hi = hi && !lo;
             }
+            *last_stump = Some(ends[usize::from(stump_hi)]);
             exits.extend(
                 pixels
                     .iter()
@@ -653,6 +676,22 @@ fn flood(
 /// forearm's, and the palm was placed on the forearm. Holes larger than
 /// [`MAX_FILLED_HOLE_PX`] (a gap enclosed by curled fingers) stay. `inv` has a background
 /// border, where the flood starts.
+/// The centroid of the points in the last [`STUMP_MM`] of the principal axis at its high (`hi`)
+/// or low end (`at_end`), `t` the points' positions along the axis.
+fn end_centroid(
+    pts: &[Vector3<f64>],
+    t: &[f64],
+    at_end: impl Fn(bool, f64) -> bool,
+    hi: bool,
+) -> Vector3<f64> {
+    let (sum, n) = pts
+        .iter()
+        .zip(t)
+        .filter(|&(_, &x)| at_end(hi, x))
+        .fold((Vector3::zeros(), 0usize), |(s, n), (p, _)| (s + p, n + 1));
+    sum / n.max(1) as f64
+}
+
 fn fill_holes(inv: &mut Mask, queue: &mut VecDeque<usize>, hole: &mut Vec<usize>) {
     const OUTSIDE: u8 = 2;
     const HOLE: u8 = 3;
@@ -1092,6 +1131,69 @@ mod tests {
             "the stump's end is cut"
         );
         assert_eq!(out.mask.data[pixel(0.0, 0.0)], 1);
+    }
+
+    /// A flat arm at 400 mm whose far end is a fist's knuckle block (not thin), its palm cut
+    /// by two 1-px dropout lines (a structured-light shadow) in the second frame, which leaves
+    /// the forearm with the widest inscribed circle: the stump stays where the first frame,
+    /// with an intact palm, put it.
+    #[test]
+    fn the_stump_stays_at_the_forearm_when_shadows_cut_the_palm() {
+        let camera = Camera::sr300_qvga();
+        let (w, h) = (camera.width, camera.height);
+        let z = 500.0;
+        let frame = |shadows: bool| {
+            let inside = |x: f64, y: f64| {
+                let palm = x * x + y * y < 45.0 * 45.0;
+                let knuckles = x.abs() < 30.0 && y < -20.0 && y > -95.0;
+                let forearm = x.abs() < 34.0 && y > 30.0 && y < 160.0;
+                let shadow = shadows && ((y + 15.0).abs() < 1.2 || (y - 15.0).abs() < 1.2);
+                (palm || knuckles || forearm) && !shadow
+            };
+            let mut depth = DepthImage::zeros(w, h);
+            for v in 0..h {
+                for u in 0..w {
+                    let p = camera.backproject(u as f64, v as f64, z);
+                    if inside(p.x, p.y) {
+                        depth.data[(v * w + u) as usize] = z as u16;
+                    }
+                }
+            }
+            depth
+        };
+        let pixel = |x: f64, y: f64| {
+            let q = camera.project(&Vector3::new(x, y, z));
+            (q.y.round() as u32 * w + q.x.round() as u32) as usize
+        };
+        let segment = |depth: &DepthImage, scratch: &mut SegmentScratch| {
+            let mut out = HandSegment::default();
+            segment_depth_only(
+                depth,
+                &camera,
+                &DepthOnlyParams::default(),
+                &mut out,
+                scratch,
+            );
+            let kept = |x, y| out.mask.data[pixel(x, y)] == 1;
+            (kept(0.0, -90.0), kept(0.0, 155.0))
+        };
+        let (intact, shadowed) = (frame(false), frame(true));
+        // Alone, the shadowed frame takes the knuckles for the stump.
+        assert_eq!(
+            segment(&shadowed, &mut SegmentScratch::default()),
+            (false, true)
+        );
+        let mut scratch = SegmentScratch::default();
+        assert_eq!(
+            segment(&intact, &mut scratch),
+            (true, false),
+            "knuckles kept"
+        );
+        assert_eq!(
+            segment(&shadowed, &mut scratch),
+            (true, false),
+            "knuckles still kept"
+        );
     }
 
     #[test]
