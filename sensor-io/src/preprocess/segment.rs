@@ -669,13 +669,6 @@ fn flood(
     }
 }
 
-/// Turn the small holes of `inv` (background pixels, nonzero, that the background around the
-/// component does not reach; zero = the component) into component pixels: the inscribed
-/// circles are measured to the silhouette's outline, not to speckle inside it — flying pixels
-/// at a fist's inner occluding contours punch holes that shrank the fist's circles below the
-/// forearm's, and the palm was placed on the forearm. Holes larger than
-/// [`MAX_FILLED_HOLE_PX`] (a gap enclosed by curled fingers) stay. `inv` has a background
-/// border, where the flood starts.
 /// The centroid of the points in the last [`STUMP_MM`] of the principal axis at its high (`hi`)
 /// or low end (`at_end`), `t` the points' positions along the axis.
 fn end_centroid(
@@ -692,6 +685,13 @@ fn end_centroid(
     sum / n.max(1) as f64
 }
 
+/// Turn the small holes of `inv` (background pixels, nonzero, that the background around the
+/// component does not reach; zero = the component) into component pixels: the inscribed
+/// circles are measured to the silhouette's outline, not to speckle inside it — flying pixels
+/// at a fist's inner occluding contours punch holes that shrank the fist's circles below the
+/// forearm's, and the palm was placed on the forearm. Holes larger than
+/// [`MAX_FILLED_HOLE_PX`] (a gap enclosed by curled fingers) stay. `inv` has a background
+/// border, where the flood starts.
 fn fill_holes(inv: &mut Mask, queue: &mut VecDeque<usize>, hole: &mut Vec<usize>) {
     const OUTSIDE: u8 = 2;
     const HOLE: u8 = 3;
@@ -1081,12 +1081,28 @@ mod tests {
         assert_eq!(pick_palm(c.into_iter(), &pts, near_second), (4, 10.0));
     }
 
+    /// A flat shape at depth `z` (mm) facing the camera: the pixels whose ray meets the plane
+    /// at a point `(x, y)` that `inside` holds.
+    fn flat_depth(camera: &Camera, z: f64, inside: impl Fn(f64, f64) -> bool) -> DepthImage {
+        let (w, h) = (camera.width, camera.height);
+        let mut depth = DepthImage::zeros(w, h);
+        for v in 0..h {
+            for u in 0..w {
+                let p = camera.backproject(u as f64, v as f64, z);
+                if inside(p.x, p.y) {
+                    depth.data[(v * w + u) as usize] = z as u16;
+                }
+            }
+        }
+        depth
+    }
+
     /// A flat hand at 400 mm, fingers up: a palm disc (45 mm), four 16 × 95 mm fingers, and a
     /// forearm stump 60 mm wide and 70 mm long, shorter than the fingers reach from the palm.
     #[test]
     fn a_short_forearm_stump_is_cut_and_the_fingers_kept() {
         let camera = Camera::sr300_qvga();
-        let (w, h) = (camera.width, camera.height);
+        let w = camera.width;
         let z = 400.0;
         let inside = |x: f64, y: f64| {
             let palm = x * x + y * y < 45.0 * 45.0;
@@ -1097,15 +1113,7 @@ mod tests {
             let stump = y > 30.0 && y < 115.0 && x.abs() < 30.0;
             palm || finger || stump
         };
-        let mut depth = DepthImage::zeros(w, h);
-        for v in 0..h {
-            for u in 0..w {
-                let p = camera.backproject(u as f64, v as f64, z);
-                if inside(p.x, p.y) {
-                    depth.data[(v * w + u) as usize] = z as u16;
-                }
-            }
-        }
+        let depth = flat_depth(&camera, z, inside);
         let (mut out, mut scratch) = (HandSegment::default(), SegmentScratch::default());
         segment_depth_only(
             &depth,
@@ -1133,14 +1141,14 @@ mod tests {
         assert_eq!(out.mask.data[pixel(0.0, 0.0)], 1);
     }
 
-    /// A flat arm at 400 mm whose far end is a fist's knuckle block (not thin), its palm cut
+    /// A flat arm at 500 mm whose far end is a fist's knuckle block (not thin), its palm cut
     /// by two 1-px dropout lines (a structured-light shadow) in the second frame, which leaves
     /// the forearm with the widest inscribed circle: the stump stays where the first frame,
     /// with an intact palm, put it.
     #[test]
     fn the_stump_stays_at_the_forearm_when_shadows_cut_the_palm() {
         let camera = Camera::sr300_qvga();
-        let (w, h) = (camera.width, camera.height);
+        let w = camera.width;
         let z = 500.0;
         let frame = |shadows: bool| {
             let inside = |x: f64, y: f64| {
@@ -1150,16 +1158,7 @@ mod tests {
                 let shadow = shadows && ((y + 15.0).abs() < 1.2 || (y - 15.0).abs() < 1.2);
                 (palm || knuckles || forearm) && !shadow
             };
-            let mut depth = DepthImage::zeros(w, h);
-            for v in 0..h {
-                for u in 0..w {
-                    let p = camera.backproject(u as f64, v as f64, z);
-                    if inside(p.x, p.y) {
-                        depth.data[(v * w + u) as usize] = z as u16;
-                    }
-                }
-            }
-            depth
+            flat_depth(&camera, z, inside)
         };
         let pixel = |x: f64, y: f64| {
             let q = camera.project(&Vector3::new(x, y, z));
