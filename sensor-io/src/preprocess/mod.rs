@@ -5,6 +5,7 @@
 //! ([`depth_noise`]).
 
 mod downsample;
+mod dropouts;
 mod noise;
 mod normals;
 mod pipeline;
@@ -12,6 +13,7 @@ mod segment;
 mod subsample;
 
 pub use downsample::{clip_range, median_downsample};
+pub use dropouts::{close_dropouts, DropoutScratch, CLOSE_PX, DROPOUT_GATE_PX};
 pub use noise::{depth_noise, depth_noise_with, gate_for_noise, noise_scale, NoiseMonitor};
 pub use normals::depth_normals;
 pub use pipeline::{PreprocessConfig, PreprocessedFrame, Preprocessor, Segmentation, Subsampling};

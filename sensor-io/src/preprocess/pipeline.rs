@@ -4,6 +4,7 @@
 use nalgebra::Vector3;
 
 use super::downsample::{clip_range, median_downsample};
+use super::dropouts::{close_dropouts, DropoutScratch};
 use super::normals::depth_normals;
 use super::segment::{
     segment_depth_only, segment_wristband, DepthOnlyParams, HandSegment, WristbandParams,
@@ -12,7 +13,7 @@ use super::subsample::{subsample_uniform, FarthestSampler};
 use crate::camera::Camera;
 use crate::dt::DistanceTransform;
 use crate::error::{Result, SensorError};
-use crate::image::{DepthImage, Frame};
+use crate::image::{DepthImage, Frame, Mask};
 
 /// How the hand is segmented.
 #[derive(Clone, Debug)]
@@ -79,7 +80,9 @@ pub struct PreprocessedFrame {
     pub depth: DepthImage,
     /// Segmentation: silhouette `S_s`, palm center, wristband.
     pub hand: HandSegment,
-    /// Distance transform of the silhouette with closest-pixel indices.
+    /// Distance transform of the silhouette with closest-pixel indices; the zero-depth pixels
+    /// that the silhouette encloses (a structured-light sensor's dropouts and shadows) count
+    /// as silhouette ([`close_dropouts`]).
     pub dt: DistanceTransform,
     /// Subsampled sensor points `X_s` (camera frame, mm).
     pub points: Vec<Vector3<f64>>,
@@ -99,6 +102,9 @@ pub struct Preprocessor {
     picks: Vec<usize>,
     sampler: FarthestSampler,
     segment_scratch: super::segment::SegmentScratch,
+    dropout_scratch: DropoutScratch,
+    /// The silhouette of the distance transform (the hand's, its enclosed dropouts closed).
+    closed: Mask,
 }
 
 impl Preprocessor {
@@ -175,7 +181,14 @@ impl Preprocessor {
                 out.hand.palm_center = None;
             }
         }
-        out.dt.compute(&out.hand.mask);
+        let closed = close_dropouts(
+            &out.depth,
+            &out.hand.mask,
+            &mut self.dropout_scratch,
+            &mut self.closed,
+        );
+        out.dt
+            .compute(if closed { &self.closed } else { &out.hand.mask });
         self.all_points.clear();
         self.all_pixels.clear();
         let w = cam.width as usize;
