@@ -9,7 +9,10 @@
 //! such pixels, the zero-depth pixels that a morphological closing of the silhouette covers are
 //! counted in; a silhouette without enclosed dropouts (noise-free and ToF frames, whose
 //! silhouettes are complete) is left as it is. Pixels with a depth are never added, so a gap
-//! between fingers through which a background is measured stays open.
+//! between fingers through which a background is measured stays open. An unmeasured
+//! background that the hand encloses (a claw against nothing in range) is indistinguishable
+//! from dropouts and is closed too: on the scanned claw, noise-free, online calibration went
+//! 10.2 → 8.0 mm with it.
 
 use crate::image::{DepthImage, Mask};
 
