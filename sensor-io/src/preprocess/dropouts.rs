@@ -14,6 +14,9 @@
 //! from dropouts and is closed too: on the scanned claw, noise-free, online calibration went
 //! 10.2 → 8.0 mm with it.
 
+use std::collections::VecDeque;
+
+use super::segment::flood;
 use crate::image::{DepthImage, Mask};
 
 /// Enclosed zero-depth pixels from which a silhouette counts as carrying dropouts.
@@ -24,8 +27,9 @@ pub const CLOSE_PX: usize = 2;
 /// Reusable buffers of [`close_dropouts`].
 #[derive(Clone, Debug, Default)]
 pub struct DropoutScratch {
-    reached: Vec<bool>,
-    stack: Vec<(usize, usize)>,
+    /// The mask's bounding box with a one-pixel frame, for the flood of `enclosed_dropouts`.
+    framed: Vec<u8>,
+    queue: VecDeque<usize>,
     rows: Vec<u8>,
     dilated: Vec<u8>,
 }
@@ -131,54 +135,39 @@ fn bounding_box(mask: &Mask) -> Option<(usize, usize, usize, usize)> {
 }
 
 /// The zero-depth pixels that `mask` encloses: inside its bounding box `bbox` and not reached
-/// from the box's border through pixels outside the mask.
+/// from the box's border through pixels outside the mask (flooded in a copy of the box with a
+/// one-pixel frame, as `segment_depth_only` finds its holes).
 fn enclosed_dropouts(
     depth: &DepthImage,
     mask: &Mask,
     (u0, v0, u1, v1): (usize, usize, usize, usize),
     scratch: &mut DropoutScratch,
 ) -> usize {
+    const OUTSIDE: u8 = 2;
     let w = mask.width as usize;
-    let (bw, bh) = (u1 - u0 + 1, v1 - v0 + 1);
-    let pixel = |x: usize, y: usize| (v0 + y) * w + u0 + x;
-    let DropoutScratch { reached, stack, .. } = scratch;
-    reached.clear();
-    reached.resize(bw * bh, false);
-    stack.clear();
-    let mut visit = |x: usize, y: usize, stack: &mut Vec<(usize, usize)>| {
-        if !reached[y * bw + x] && mask.data[pixel(x, y)] == 0 {
-            reached[y * bw + x] = true;
-            stack.push((x, y));
-        }
-    };
-    for x in 0..bw {
-        visit(x, 0, stack);
-        visit(x, bh - 1, stack);
-    }
-    for y in 0..bh {
-        visit(0, y, stack);
-        visit(bw - 1, y, stack);
-    }
-    while let Some((x, y)) = stack.pop() {
-        if x > 0 {
-            visit(x - 1, y, stack);
-        }
-        if x + 1 < bw {
-            visit(x + 1, y, stack);
-        }
-        if y > 0 {
-            visit(x, y - 1, stack);
-        }
-        if y + 1 < bh {
-            visit(x, y + 1, stack);
+    let (bw, bh) = (u1 - u0 + 3, v1 - v0 + 3);
+    let DropoutScratch { framed, queue, .. } = scratch;
+    framed.clear();
+    framed.resize(bw * bh, 1);
+    for y in 0..=v1 - v0 {
+        for x in 0..=u1 - u0 {
+            framed[(y + 1) * bw + x + 1] = u8::from(mask.data[(v0 + y) * w + u0 + x] == 0);
         }
     }
+    flood(
+        framed,
+        (bw, bh),
+        0,
+        OUTSIDE,
+        queue,
+        |m, _, _| m == 1,
+        |_| {},
+    );
     let mut enclosed = 0;
-    for y in 0..bh {
-        for x in 0..bw {
-            let i = pixel(x, y);
-            enclosed +=
-                usize::from(!reached[y * bw + x] && mask.data[i] == 0 && depth.data[i] == 0);
+    for y in 0..=v1 - v0 {
+        for x in 0..=u1 - u0 {
+            let i = (v0 + y) * w + u0 + x;
+            enclosed += usize::from(framed[(y + 1) * bw + x + 1] == 1 && depth.data[i] == 0);
         }
     }
     enclosed

@@ -646,7 +646,7 @@ fn neighbours4(i: usize, w: usize, h: usize) -> impl Iterator<Item = usize> {
 /// Breadth-first flood of the `w × h` image `mask` from `start`: `start` and every pixel `k`
 /// 4-connected to a flooded pixel `j` with `enters(mask[k], j, k)` are marked `mark` and handed
 /// to `visit` in flooding order.
-fn flood(
+pub(super) fn flood(
     mask: &mut [u8],
     (w, h): (usize, usize),
     start: usize,
