@@ -560,6 +560,84 @@ fn fig_4_7_tof() {
     }
 }
 
+/// The six random subjects of the tracking numbers in `honline_calib`'s docs (300 frames,
+/// last-third keypoint error over the true template's), under the noise model `NOISE`
+/// (default `tof`), and how far the final estimate is pulled back toward the template: the
+/// least-squares slope of its error `β̂ − β` on the subject's offset `β − β_template` over
+/// every entry of the six (0: no pull, −1: the template kept), the mean excess of each keypoint
+/// over the true template's, and the entries with the largest RMS error. Run by hand.
+#[test]
+#[ignore]
+fn subject_ratios() {
+    let noise = std::env::var("NOISE").unwrap_or_else(|_| "tof".into());
+    let seeds: Vec<u64> = (7..=12).collect();
+    let runs = parallel(seeds.clone(), |&seed| {
+        let (truth, motion, s) = scenario(&noise, 300, seed);
+        let online = run_online(&s, &truth, None, &motion, config(Estimator::Iekf)).unwrap();
+        let reference = run_true_template(&s, &truth, &motion, TrackerConfig::default()).unwrap();
+        let ratio = last_third_error(&online.run) / last_third_error(&reference);
+        let excess: Vec<f64> = last_third_keypoints(&online.run)
+            .iter()
+            .zip(last_third_keypoints(&reference))
+            .map(|(a, b)| a - b)
+            .collect();
+        let last = &online.frames.last().unwrap().beta;
+        let error: Vec<f64> = last.iter().zip(&truth).map(|(a, b)| a - b).collect();
+        let offset: Vec<f64> = truth
+            .iter()
+            .zip(&online.template)
+            .map(|(a, b)| a - b)
+            .collect();
+        (ratio, online.end_error(), error, offset, excess)
+    });
+    let ratios: Vec<String> = runs.iter().map(|r| format!("{:.2}", r.0)).collect();
+    let within = runs.iter().filter(|r| r.0 <= 1.10).count();
+    let e_beta: Vec<f64> = runs.iter().map(|r| r.1).collect();
+    let (sxy, sxx) = runs
+        .iter()
+        .flat_map(|r| r.2.iter().zip(&r.3))
+        .fold((0.0, 0.0), |(sxy, sxx), (e, o)| (sxy + e * o, sxx + o * o));
+    println!(
+        "{noise}, subjects {seeds:?}: ratios {} ({within} of 6 within 10 %), E_β at the end {e_beta:.2?} mm; error ≈ {:+.3} × offset from the template",
+        ratios.join(" / "),
+        sxy / sxx
+    );
+    let excess: Vec<String> = (0..21)
+        .map(|k| format!("{:+.2}", runs.iter().map(|r| r.4[k]).sum::<f64>() / 6.0))
+        .collect();
+    println!(
+        "  mean excess per keypoint (mm, DESIGN.md order): {}",
+        excess.join(" ")
+    );
+    let names: Vec<String> = basis().names().map(String::from).collect();
+    let mut entries: Vec<(&str, (f64, f64), f64)> = names
+        .iter()
+        .enumerate()
+        .map(|(i, n)| {
+            let column = |k: usize| runs.iter().map(|r| [&r.2, &r.3][k][i]).collect::<Vec<_>>();
+            (n.as_str(), mean_std(&column(0)), mean_std(&column(1)).0)
+        })
+        .collect();
+    let rms = |(mean, std): (f64, f64)| mean.hypot(std);
+    entries.sort_by(|a, b| rms(b.1).total_cmp(&rms(a.1)));
+    for (name, (mean, std), offset) in entries.iter().take(12) {
+        println!("  {name:24} error {mean:+.2} ± {std:.2} mm (offset {offset:+.2} mm)");
+    }
+}
+
+/// Per keypoint the mean error (mm) over the last third of `run`'s frames.
+fn last_third_keypoints(run: &eval::synthetic::SyntheticRun) -> Vec<f64> {
+    let n = run.records.len();
+    let tail = n - n / 3;
+    let mut sum = vec![0.0; 21];
+    for (r, t) in run.records[tail..].iter().zip(&run.truth[tail..]) {
+        for ((s, a), b) in sum.iter_mut().zip(&r.keypoints).zip(&t.keypoints) {
+            *s += (0..3).map(|k| (a[k] - b[k]).powi(2)).sum::<f64>().sqrt() / (n / 3) as f64;
+        }
+    }
+    sum
+}
+
 /// Runs `jobs` on `THREADS` (default 2) threads, results in job order.
 fn parallel<T: Sync, R: Send>(jobs: Vec<T>, f: impl Fn(&T) -> R + Sync) -> Vec<R> {
     let threads: usize = std::env::var("THREADS")

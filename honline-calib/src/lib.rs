@@ -153,6 +153,19 @@
 //!   nine ToF sequences 24.69 → 23.56 mm in sum, none worse by more than 0.09 mm. σ̂¹ (the
 //!   scaling an ℓ1 data term asks for) gained a little more on the subjects and lost the hard
 //!   motions again (`crossing` 4.48, `rotation_fast` 4.69 mm).
+//! - Where the excess sits, session 24 (`eval/tests/ch4_acceptance.rs` `subject_ratios`, run by
+//!   hand; subjects 7–12, last-third keypoint error over the true template's, mean over the
+//!   six). Noise-free it is +0.01–0.12 mm per keypoint, largest on the pinky (PIP +0.12 mm).
+//!   The estimate's error has a slope of −0.016 on the subject's offset from the template, so
+//!   the prior hardly pulls. Every finger base and palm center ends ≈ +0.3 mm in x (a shift of
+//!   the hand against its wrist joint that the band hides and the global translation absorbs:
+//!   the wrist keypoint's excess is +0.01 mm). `wrist_length`, which only moves the spheres
+//!   under the band, drifts +5.8 ± 2.6 mm without effect on any keypoint. Under ToF the excess
+//!   sits at the knuckles: index / ring / pinky MCP +0.86 / +0.89 / +1.18 mm, where the
+//!   finger bases' `base_y` end ±1.7–1.9 mm off (RMS over the six). The slope is −0.155 there:
+//!   the noise-scaled shape-space prior takes back about a sixth of each subject's offset from
+//!   the template, and about half of it for the middle phalanges (index / middle / ring
+//!   −0.67 / −0.71 / −0.92 mm against offsets of +1.2 / +1.5 / +0.9 mm).
 //! - Still, online calibration beats none: the same tracker on the default template tracks
 //!   subjects 7 / 8 / 9 at 7.3 / 11.1 / 20.5× the true template's error noise-free and
 //!   1.48 / 1.75 / 3.76× under ToF (subject 7 guarded in `tracking_with_online_calibration_*`;
