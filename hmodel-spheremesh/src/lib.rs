@@ -72,6 +72,17 @@
 //!     (4.12).
 //! - Priors: τ_pose = 1e4 on the project's PCA prior, joint limits 1e7, htrack's temporal
 //!   weights (3, 3; hmodel used 0.05) and uniform damping λ = 100 (shared with Ch. 2).
+//!   τ_pose measured in session 24 (`hands track --model spheremesh`, default hand, 240
+//!   frames, seed 7, mean keypoint error, τ_pose 1e4 / 3e3 / 1e3 / no prior). Under ToF the
+//!   prior pays on the motions that real hands make: occlusion 1.65 / 2.07 / 2.75 / 3.27 mm,
+//!   rotating fist 1.65 / 1.69 / – / 2.51, pinch 0.79 / 0.84 / – / 1.04. Each of the 16
+//!   motions but one is best at 1e4 or within 0.03 mm of it. The exception is `random`, whose
+//!   joints move independently: 1.40 / 1.09 / 1.04 / 1.09. Noise-free the same holds on 14
+//!   (fist 0.33 / 0.41 / – / 0.75), against `random` (0.28 / 0.19 / – / 0.19) and the
+//!   rotating fist (0.71 / 0.60 / – / 0.66). The prior's energy does
+//!   not tell the two kinds of motion apart: the teaser's 90th percentile, 7.5·10³, lies above
+//!   `random`'s median, 5.9·10³. So a robust (saturating) prior would give up the one to win
+//!   the other.
 //!
 //! # Example
 //! ```
