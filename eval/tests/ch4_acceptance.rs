@@ -598,12 +598,18 @@ fn subject_ratios() {
         .flat_map(|r| r.2.iter().zip(&r.3))
         .fold((0.0, 0.0), |(sxy, sxx), (e, o)| (sxy + e * o, sxx + o * o));
     println!(
-        "{noise}, subjects {seeds:?}: ratios {} ({within} of 6 within 10 %), E_β at the end {e_beta:.2?} mm; error ≈ {:+.3} × offset from the template",
+        "{noise}, subjects {seeds:?}: ratios {} ({within} of {} within 10 %), E_β at the end {e_beta:.2?} mm; error ≈ {:+.3} × offset from the template",
         ratios.join(" / "),
+        runs.len(),
         sxy / sxx
     );
     let excess: Vec<String> = (0..21)
-        .map(|k| format!("{:+.2}", runs.iter().map(|r| r.4[k]).sum::<f64>() / 6.0))
+        .map(|k| {
+            format!(
+                "{:+.2}",
+                runs.iter().map(|r| r.4[k]).sum::<f64>() / runs.len() as f64
+            )
+        })
         .collect();
     println!(
         "  mean excess per keypoint (mm, DESIGN.md order): {}",
@@ -627,12 +633,13 @@ fn subject_ratios() {
 
 /// Per keypoint the mean error (mm) over the last third of `run`'s frames.
 fn last_third_keypoints(run: &eval::synthetic::SyntheticRun) -> Vec<f64> {
-    let n = run.records.len();
+    let n = run.records.len().min(run.truth.len());
     let tail = n - n / 3;
+    let frames = (n - tail).max(1) as f64;
     let mut sum = vec![0.0; 21];
-    for (r, t) in run.records[tail..].iter().zip(&run.truth[tail..]) {
+    for (r, t) in run.records[tail..n].iter().zip(&run.truth[tail..n]) {
         for ((s, a), b) in sum.iter_mut().zip(&r.keypoints).zip(&t.keypoints) {
-            *s += (0..3).map(|k| (a[k] - b[k]).powi(2)).sum::<f64>().sqrt() / (n / 3) as f64;
+            *s += (0..3).map(|k| (a[k] - b[k]).powi(2)).sum::<f64>().sqrt() / frames;
         }
     }
     sum
