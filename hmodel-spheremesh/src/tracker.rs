@@ -18,7 +18,7 @@ use hand_model::solver::{
 };
 use hand_model::spheremesh::{PosedSphereMesh, SphereMeshTemplate};
 use nalgebra::{Vector2, Vector3};
-use sensor_io::preprocess::{gate_for_noise, NoiseMonitor, PreprocessedFrame};
+use sensor_io::preprocess::{gate_for_noise, slide_for_noise, NoiseMonitor, PreprocessedFrame};
 use sensor_io::record::HandRecord;
 use serde::{Deserialize, Serialize};
 
@@ -99,8 +99,12 @@ pub struct TrackerConfig {
     /// mm) keep the thesis' rule.
     pub ray_gate_noise: f64,
     /// How far an along-ray footpoint may lie from the closest point (mm,
-    /// [`TrackingCtx::set_ray_slide`]).
+    /// [`TrackingCtx::set_ray_slide`]), on data of up to `ray_slide / ray_slide_noise` of
+    /// measured depth noise.
     pub ray_slide: f64,
+    /// Above that noise the slide is this many σ̂ ([`Self::ray_slide_for`]; 0: fixed). Default
+    /// 1.5: the 7.5 mm slide was chosen on the ToF model's σ̂ ≈ 5 mm.
+    pub ray_slide_noise: f64,
     /// ℓ1 by IRLS (as htrack/hmodel, ANCHOR-FACTS §5.3).
     pub irls: IrlsParams,
     /// How m2d finds the model outside the silhouette.
@@ -139,6 +143,7 @@ impl Default for TrackerConfig {
             ray_gate: Some(20.0),
             ray_gate_noise: 1.5,
             ray_slide: DEFAULT_RAY_SLIDE,
+            ray_slide_noise: 1.5,
             irls: IrlsParams::default(),
             m2d_mode: M2dMode::Render,
             m2d_stride: 1,
@@ -162,6 +167,13 @@ impl TrackerConfig {
     /// yet): [`Self::ray_gate`] when [`Self::ray_gate_noise`] admits it.
     pub fn ray_gate_for(&self, sigma: Option<f64>) -> Option<f64> {
         gate_for_noise(self.ray_gate, self.ray_gate_noise, sigma)
+    }
+
+    /// The along-ray slide for data of measured depth noise `sigma` (mm; `None`: not measured
+    /// yet): [`Self::ray_slide`], or [`Self::ray_slide_noise`]·σ̂ where that is larger
+    /// ([`slide_for_noise`]).
+    pub fn ray_slide_for(&self, sigma: Option<f64>) -> f64 {
+        slide_for_noise(self.ray_slide, self.ray_slide_noise, sigma)
     }
 }
 
@@ -392,8 +404,13 @@ impl<'m> Tracker<'m> {
         if n >= self.frames.loss().min_points.max(1) {
             self.problem.ctx.set_frame(frame);
             if self.noise.observe(&frame.depth, &frame.hand.mask) {
-                let gate = self.config.ray_gate_for(self.noise.sigma());
-                self.problem.ctx.set_ray_gate(gate);
+                let sigma = self.noise.sigma();
+                self.problem
+                    .ctx
+                    .set_ray_gate(self.config.ray_gate_for(sigma));
+                let slide = self.config.ray_slide_for(sigma);
+                self.problem.ctx.set_ray_slide(slide);
+                self.frames.set_noise(sigma);
             }
         }
         let outcome = self.frames.step(&mut self.problem, n);
@@ -410,6 +427,9 @@ impl<'m> Tracker<'m> {
             );
             rec.energies
                 .insert("mean_distance_mm".into(), stats.mean_distance);
+            if let Some(sigma) = self.noise.sigma() {
+                rec.energies.insert("depth_noise_mm".into(), sigma);
+            }
             rec.energies
                 .insert("outside_fraction".into(), stats.outside);
         }

@@ -38,6 +38,8 @@ pub struct FrameLoop {
     pub pose: Pose,
     /// The pose of a fresh start (e.g. the PCA mean pose), used when every hypothesis fails.
     pub fallback: Pose,
+    /// The settings as given, and as in force for the measured depth noise.
+    base: LossParams,
     loss: LossParams,
     initialized: bool,
     failed_run: usize,
@@ -49,15 +51,22 @@ impl FrameLoop {
         Self {
             pose: fallback.clone(),
             fallback,
+            base: loss.clone(),
             loss,
             initialized: false,
             failed_run: 0,
         }
     }
 
-    /// The loss settings.
+    /// The loss settings in force (for the depth noise last set).
     pub fn loss(&self) -> &LossParams {
         &self.loss
+    }
+
+    /// Judge the next frames for a sensor of depth noise `sigma` (σ̂, mm; see
+    /// [`LossParams::for_noise`]).
+    pub fn set_noise(&mut self, sigma: Option<f64>) {
+        self.loss = self.base.for_noise(sigma);
     }
 
     /// Continue from `pose` at the next frame instead of re-initializing.

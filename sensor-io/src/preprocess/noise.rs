@@ -32,6 +32,19 @@ pub fn gate_for_noise(gate: Option<f64>, min_noise: f64, sigma: Option<f64>) -> 
     gate.filter(|_| noisy)
 }
 
+/// How far the trackers' along-ray footpoint may slide from the closest point on data of
+/// measured depth noise `sigma` (mm): `slide`, raised to `per_noise·σ̂` where that is larger.
+/// The footpoint slides with the noise along the ray (by `ε·sin φ`), so a slide measured at
+/// one noise level keeps its share of the points at another only in proportion to σ̂.
+/// `slide` itself when it is negative (registration off) or NaN, when `per_noise` is not
+/// positive, or when `sigma` is not measured or not finite.
+pub fn slide_for_noise(slide: f64, per_noise: f64, sigma: Option<f64>) -> f64 {
+    match sigma {
+        Some(s) if slide >= 0.0 && per_noise > 0.0 && s.is_finite() => slide.max(per_noise * s),
+        _ => slide,
+    }
+}
+
 /// [`depth_noise`] with a caller's scratch buffer (no allocation once it is large enough).
 pub fn depth_noise_with(depth: &DepthImage, mask: &Mask, diffs: &mut Vec<f64>) -> Option<f64> {
     const EDGE: f64 = 40.0;
@@ -106,6 +119,21 @@ impl NoiseMonitor {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_slide_follows_the_noise_above_its_own() {
+        assert_eq!(slide_for_noise(7.5, 1.5, Some(4.0)), 7.5);
+        assert_eq!(slide_for_noise(7.5, 1.5, Some(10.0)), 15.0);
+        assert_eq!(slide_for_noise(7.5, 1.5, None), 7.5);
+        assert_eq!(slide_for_noise(7.5, 1.5, Some(f64::NAN)), 7.5);
+        assert_eq!(slide_for_noise(7.5, 0.0, Some(10.0)), 7.5);
+        assert_eq!(slide_for_noise(-1.0, 1.5, Some(10.0)), -1.0);
+        assert_eq!(
+            slide_for_noise(f64::INFINITY, 1.5, Some(10.0)),
+            f64::INFINITY
+        );
+        assert!(slide_for_noise(f64::NAN, 1.5, Some(10.0)).is_nan());
+    }
     use rand::{Rng, SeedableRng};
 
     fn plane(sigma: f64, seed: u64) -> (DepthImage, Mask) {
