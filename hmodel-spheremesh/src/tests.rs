@@ -414,7 +414,10 @@ fn along_ray_correspondences_follow_the_measured_noise() {
 fn noisy_frame(exact: &PreprocessedFrame, sigma: f64, seed: u64) -> PreprocessedFrame {
     use rand::{Rng, SeedableRng};
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
-    let camera = exact.camera.clone().expect("a rendered frame has its camera");
+    let camera = exact
+        .camera
+        .clone()
+        .expect("a rendered frame has its camera");
     let mut frame = exact.clone();
     for d in frame.depth.data.iter_mut().filter(|d| **d != 0) {
         let (u1, u2): (f64, f64) = (rng.random_range(1e-12..1.0), rng.random());
@@ -441,7 +444,9 @@ fn heavy_depth_noise_fails_no_frame_and_tracks_closer() {
     let t = default_right_hand();
     let truth = test_pose(&t);
     let exact = crate::synthetic::rendered_frame(&t, &truth, &Camera::sr300_qvga(), 2500).unwrap();
-    let frames: Vec<_> = (0..12).map(|seed| noisy_frame(&exact, 12.0, seed)).collect();
+    let frames: Vec<_> = (0..12)
+        .map(|seed| noisy_frame(&exact, 12.0, seed))
+        .collect();
     let prior = PcaPrior::project_default();
     let expected = PosedSphereMesh::new(&t, &truth).keypoints(&t);
     let run = |config: TrackerConfig| {
