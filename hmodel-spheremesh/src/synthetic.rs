@@ -110,6 +110,31 @@ pub fn rendered_frame(
     })
 }
 
+/// `exact` (a [`rendered_frame`]) with Gaussian depth noise of `sigma` mm on every pixel of
+/// its depth image, its points moved along their rays to the noisy depths, so that the
+/// trackers measure σ̂ ≈ `sigma`; deterministic for a given `seed`. A frame without a camera
+/// is returned as it is.
+pub fn noisy_frame(exact: &PreprocessedFrame, sigma: f64, seed: u64) -> PreprocessedFrame {
+    use rand::{Rng, SeedableRng};
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
+    let Some(camera) = exact.camera.clone() else {
+        return exact.clone();
+    };
+    let mut frame = exact.clone();
+    for d in frame.depth.data.iter_mut().filter(|d| **d != 0) {
+        let (u1, u2): (f64, f64) = (rng.random_range(1e-12..1.0), rng.random());
+        let n = (-2.0 * u1.ln()).sqrt() * (std::f64::consts::TAU * u2).cos() * sigma;
+        *d = (f64::from(*d) + n).round().max(1.0) as u16;
+    }
+    let w = camera.width;
+    for (p, &k) in frame.points.iter_mut().zip(&frame.pixels) {
+        if let Some(&z) = frame.depth.data.get(k as usize) {
+            *p = camera.backproject(f64::from(k % w), f64::from(k / w), f64::from(z));
+        }
+    }
+    frame
+}
+
 /// A synthetic calibration problem (issue 6): a subject whose honline β is the default
 /// template's perturbed by up to ±`perturbation` (relative), `n` depth frames of it in random
 /// poses (even frames nearly straight, odd ones bent: the bends make the phalanx lengths

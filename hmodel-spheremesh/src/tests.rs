@@ -409,29 +409,6 @@ fn along_ray_correspondences_follow_the_measured_noise() {
     }
 }
 
-/// `exact` with Gaussian depth noise of `sigma` mm on every hand pixel, its points moved
-/// along their rays to the noisy depths (so that the tracker measures σ̂ ≈ `sigma`).
-fn noisy_frame(exact: &PreprocessedFrame, sigma: f64, seed: u64) -> PreprocessedFrame {
-    use rand::{Rng, SeedableRng};
-    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
-    let camera = exact
-        .camera
-        .clone()
-        .expect("a rendered frame has its camera");
-    let mut frame = exact.clone();
-    for d in frame.depth.data.iter_mut().filter(|d| **d != 0) {
-        let (u1, u2): (f64, f64) = (rng.random_range(1e-12..1.0), rng.random());
-        let n = (-2.0 * u1.ln()).sqrt() * (std::f64::consts::TAU * u2).cos() * sigma;
-        *d = (f64::from(*d) + n).round().max(1.0) as u16;
-    }
-    let w = camera.width;
-    for (p, &k) in frame.points.iter_mut().zip(&frame.pixels) {
-        let z = f64::from(frame.depth.data[k as usize]);
-        *p = camera.backproject(f64::from(k % w), f64::from(k / w), z);
-    }
-    frame
-}
-
 /// Under heavy depth noise (σ = 12 mm, twice the ToF model's) a hand held at its true pose
 /// is ≈ 0.62 σ from its points. With the fixed loss thresholds every frame failed and the
 /// tracker re-initialized every third frame; with the fixed 7.5 mm along-ray slide the points
@@ -445,7 +422,7 @@ fn heavy_depth_noise_fails_no_frame_and_tracks_closer() {
     let truth = test_pose(&t);
     let exact = crate::synthetic::rendered_frame(&t, &truth, &Camera::sr300_qvga(), 2500).unwrap();
     let frames: Vec<_> = (0..12)
-        .map(|seed| noisy_frame(&exact, 12.0, seed))
+        .map(|seed| crate::synthetic::noisy_frame(&exact, 12.0, seed))
         .collect();
     let prior = PcaPrior::project_default();
     let expected = PosedSphereMesh::new(&t, &truth).keypoints(&t);

@@ -328,3 +328,31 @@ fn lost_frames_leave_the_shape_and_ask_for_placement() {
     );
     assert!(out.record.energies["mean_distance_mm"] < 1.0);
 }
+
+/// Under heavy depth noise (σ = 12 mm) frames at the true pose are ≈ 0.62 σ from the model:
+/// the loss criterion follows the measured noise ([`hand_model::solver::LossParams::for_noise`])
+/// and lets them teach the shape; with hmodel's fixed 6 mm every one was refused as lost.
+#[test]
+fn heavy_depth_noise_is_not_taken_for_a_lost_hand() {
+    let base = default_right_hand();
+    let (_, truth) = subject(&base, 0.1, 3);
+    let exact =
+        rendered_frame(&truth, &pose(&truth, 0, true), &Camera::sr300_qvga(), 2500).unwrap();
+    let lost = |noise_scaled: bool| {
+        let mut config = OnlineConfig::default();
+        config.tracker.loss.noise_scaled = noise_scaled;
+        let mut calib = OnlineCalibrator::new(&base, config, None).unwrap();
+        calib.set_pose(&pose(&truth, 0, true)).unwrap();
+        let mut lost = 0;
+        for k in 0..6u64 {
+            let frame = hmodel_spheremesh::synthetic::noisy_frame(&exact, 12.0, k);
+            let out = calib.track(&frame, k, 0.0);
+            let sigma = out.record.energies["depth_noise_mm"];
+            assert!((sigma - 12.0).abs() < 1.5, "measured σ̂ {sigma} mm");
+            lost += out.record.flags.iter().filter(|f| *f == "lost").count();
+        }
+        lost
+    };
+    assert_eq!(lost(true), 0);
+    assert_eq!(lost(false), 6);
+}
