@@ -120,6 +120,8 @@ impl NoiseMonitor {
 mod tests {
     use super::*;
 
+    use rand::{Rng, SeedableRng};
+
     #[test]
     fn the_slide_follows_the_noise_above_its_own() {
         assert_eq!(slide_for_noise(7.5, 1.5, Some(4.0)), 7.5);
@@ -134,7 +136,6 @@ mod tests {
         );
         assert!(slide_for_noise(f64::NAN, 1.5, Some(10.0)).is_nan());
     }
-    use rand::{Rng, SeedableRng};
 
     fn plane(sigma: f64, seed: u64) -> (DepthImage, Mask) {
         let (w, h) = (80u32, 60u32);
