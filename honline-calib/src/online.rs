@@ -7,7 +7,7 @@ use hand_model::kinematics::Pose;
 use hand_model::solver::terms::Temporal;
 use hand_model::solver::{
     sphere_mesh_points, EnergyTerm, FrameStats, IterInfo, LmCallback, LmError, LmSolver,
-    LmWorkspace, LossParams, NormalEquations, PcaPrior, TermError,
+    LmWorkspace, NormalEquations, PcaPrior, TermError,
 };
 use hand_model::spheremesh::{PosedSphereMesh, ShapeBasis, SphereMeshTemplate};
 use hand_model::ModelError;
@@ -356,8 +356,6 @@ pub struct OnlineCalibrator {
     innovation_rejected: usize,
     /// Frames failed in a row by the loss criterion ([`OnlineCalibrator::note_loss`]).
     failed_run: usize,
-    /// `tracker.loss` for the measured depth noise ([`LossParams::for_noise`]).
-    loss: LossParams,
 }
 
 impl OnlineCalibrator {
@@ -403,7 +401,6 @@ impl OnlineCalibrator {
             innovation_median: Vec::with_capacity(INNOVATION_WINDOW),
             innovation_rejected: 0,
             failed_run: 0,
-            loss: config.tracker.loss.clone(),
             ctx,
             solver,
             ws,
@@ -718,7 +715,9 @@ impl OnlineCalibrator {
                         info,
                     );
                 self.problem.data.capture_next(false);
-                let fit = self.ctx.tracking.frame_stats(&self.loss);
+                // The loss criterion at the measured depth noise.
+                let loss = self.config.tracker.loss.for_noise(self.noise.sigma());
+                let fit = self.ctx.tracking.frame_stats(&loss);
                 let lost = measured && self.note_loss(&fit);
                 let rejected = measured && (lost || self.innovation_rejects());
                 if rejected {
@@ -858,9 +857,9 @@ impl OnlineCalibrator {
     }
 
     /// When the frame's depth noise was measured ([`NoiseMonitor`]): turn the along-ray
-    /// correspondences on or off ([`TrackerConfig::ray_gate_for`]), widen their slide
-    /// ([`TrackerConfig::ray_slide_for`]) and the loss criterion's distances
-    /// ([`LossParams::for_noise`]) to the noise, and with
+    /// correspondences on or off ([`TrackerConfig::ray_gate_for`]), widen their slide to the
+    /// noise ([`TrackerConfig::ray_slide_for`]; the loss criterion follows it too,
+    /// [`hand_model::solver::LossParams::for_noise`]), and with
     /// [`OnlineConfig::noise_scaled_prior`] scale the shape-space prior by
     /// `s = max(σ̂ / 1 mm, 1)^p` ([`OnlineConfig::noise_prior_exponent`]) and, with
     /// [`LmOptions::decouple_aux`](hand_model::solver::LmOptions::decouple_aux), keep the
@@ -875,7 +874,6 @@ impl OnlineCalibrator {
         self.ctx.tracking.set_ray_gate(gate);
         let slide = self.config.tracker.ray_slide_for(sigma);
         self.ctx.tracking.set_ray_slide(slide);
-        self.loss = self.config.tracker.loss.for_noise(sigma);
         let Some(sigma) = sigma.filter(|_| self.config.noise_scaled_prior) else {
             return;
         };
