@@ -12,9 +12,9 @@ use hand_model::solver::terms::{
     JointLimits, JointLimitsParams, PosePrior, PosePriorParams, Temporal, TemporalParams,
 };
 use hand_model::solver::{
-    placement_directions, sphere_mesh_points, timed_solve, EnergyTerm, FrameLoop, FrameStats,
-    IrlsParams, LmError, LmOptions, LmSolver, LmWorkspace, LossParams, NoTerm, PcaPrior,
-    PriorSetup, SolveTiming, TrackingProblem,
+    placed_rotation, placement_directions, sphere_mesh_points, timed_solve, EnergyTerm, FrameLoop,
+    FrameStats, Hypothesis, IrlsParams, LmError, LmOptions, LmSolver, LmWorkspace, LossParams,
+    NoTerm, PcaPrior, PriorSetup, SolveTiming, TrackingProblem, PLACEMENT_ROLLS,
 };
 use hand_model::spheremesh::{PosedSphereMesh, SphereMeshTemplate};
 use nalgebra::{Vector2, Vector3};
@@ -265,11 +265,16 @@ impl TrackingProblem for Problem<'_> {
         self.ctx.frame_stats(params)
     }
 
-    fn hypotheses(&self) -> Vec<Pose> {
+    fn hypotheses(&self) -> Vec<Hypothesis> {
         let (centroid, dirs) = placement_directions(self.ctx.points());
         let target = centroid + Vector3::new(0.0, 0.0, 10.0);
-        dirs.into_iter()
-            .filter_map(|e| self.placed_mean_pose(e, &target))
+        PLACEMENT_ROLLS
+            .iter()
+            .flat_map(|&roll| dirs.iter().map(move |&e| (e, roll)))
+            .filter_map(|(e, (roll, backup))| {
+                let pose = self.placed_mean_pose(e, roll, &target)?;
+                Some(Hypothesis { pose, backup })
+            })
             .collect()
     }
 
@@ -280,12 +285,12 @@ impl TrackingProblem for Problem<'_> {
 
 impl Problem<'_> {
     /// The mean pose turned about the optical axis so that the fingers (+y) point along the
-    /// image direction `e`, with the centroid of the sphere centers on `target`.
-    fn placed_mean_pose(&self, e: Vector2<f64>, target: &Vector3<f64>) -> Option<Pose> {
+    /// image direction `e` and rolled by `roll` about them ([`placement_rotation`]), with the
+    /// centroid of the sphere centers on `target`.
+    fn placed_mean_pose(&self, e: Vector2<f64>, roll: f64, target: &Vector3<f64>) -> Option<Pose> {
         let t = self.ctx.template();
         let sk = &t.skeleton;
-        let mut pose = self.mean_pose.clone();
-        pose.set(sk, "global_rz", (-e.x).atan2(e.y)).ok()?;
+        let mut pose = placed_rotation(&self.mean_pose, sk, e, roll)?;
         let posed = PosedSphereMesh::new(t, &pose);
         let n = posed.spheres.len();
         if n == 0 {

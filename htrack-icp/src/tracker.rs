@@ -20,9 +20,9 @@ use hand_model::solver::terms::{
     JointLimits, JointLimitsParams, PosePrior, PosePriorParams, Temporal, TemporalParams,
 };
 use hand_model::solver::{
-    cylinder_points, placement_directions, timed_solve, EnergyTerm, FrameLoop, FrameStats, LmError,
-    LmOptions, LmSolver, LmWorkspace, LossParams, NoTerm, PcaPrior, PriorSetup, SolveTiming,
-    TrackingProblem,
+    cylinder_points, placement_directions, timed_solve, EnergyTerm, FrameLoop, FrameStats,
+    Hypothesis, LmError, LmOptions, LmSolver, LmWorkspace, LossParams, NoTerm, PcaPrior,
+    PriorSetup, SolveTiming, TrackingProblem,
 };
 use nalgebra::{Vector2, Vector3};
 use sensor_io::preprocess::{gate_for_noise, slide_for_noise, NoiseMonitor, PreprocessedFrame};
@@ -265,12 +265,22 @@ impl TrackingProblem for Problem<'_> {
 
     /// Initial poses from the point cloud: the mean pose with its palm on the cloud's centroid
     /// (10 mm behind the visible surface), fingers along ± the principal image axis of the
-    /// cloud, or upright (fingers toward image −y).
-    fn hypotheses(&self) -> Vec<Pose> {
+    /// cloud, or upright (fingers toward image −y). Palm toward the camera only: the sphere-mesh
+    /// tracker's edge-on backups ([`hand_model::solver::PLACEMENT_ROLLS`]) are chosen by the
+    /// model's area outside the silhouette, which this tracker does not measure; by the point
+    /// distances alone they won on the real scans' two-finger pose, whose palm-on placement
+    /// failed the frame (fingertips 11.2 → 29.2 mm, `eval/tests/scan_tracking.rs`).
+    fn hypotheses(&self) -> Vec<Hypothesis> {
         let (centroid, dirs) = placement_directions(self.ctx.points());
         let target = centroid + Vector3::new(0.0, 0.0, 10.0);
         dirs.into_iter()
-            .filter_map(|e| self.placed_mean_pose(e, &target))
+            .filter_map(|e| {
+                let pose = self.placed_mean_pose(e, &target)?;
+                Some(Hypothesis {
+                    pose,
+                    backup: false,
+                })
+            })
             .collect()
     }
 

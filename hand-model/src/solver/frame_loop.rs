@@ -17,9 +17,20 @@ pub trait TrackingProblem {
     /// The loss statistics at the last linearization point (or refresh).
     fn frame_stats(&self, params: &LossParams) -> FrameStats;
     /// Initial poses placed on the current frame's data.
-    fn hypotheses(&self) -> Vec<Pose>;
+    fn hypotheses(&self) -> Vec<Hypothesis>;
     /// Forget the temporal history (after a re-initialization or a frame without a hand).
     fn clear_history(&mut self);
+}
+
+/// A re-initialization start.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Hypothesis {
+    /// The initial pose.
+    pub pose: Pose,
+    /// Solved only when no other start (the current pose included) fits acceptably
+    /// ([`FrameStats::is_poor_placement`]): a less likely placement that could otherwise
+    /// win on a pose that none of the starts matches.
+    pub backup: bool,
 }
 
 /// How one frame went in [`FrameLoop::step`].
@@ -129,21 +140,36 @@ impl FrameLoop {
 
     /// Solve from the current pose (when initialized) and every hypothesis, keep the best by
     /// [`FrameStats::score`]; the problem is left refreshed at the chosen pose. The current
-    /// pose is always a candidate, so this never makes the fit worse by that measure.
+    /// pose is always a candidate, so this never makes the fit worse by that measure. The
+    /// backup hypotheses are solved only when the best of the others is a poor placement.
     fn reinitialize(&mut self, problem: &mut impl TrackingProblem) {
         problem.clear_history();
-        let mut best: Option<(f64, Pose)> = None;
-        let current = self.initialized.then(|| self.pose.clone());
-        for mut pose in current.into_iter().chain(problem.hypotheses()) {
-            if !problem.solve(&mut pose) || !problem.refresh(&pose) {
-                continue;
+        let mut best: Option<(f64, Pose, bool)> = None;
+        let current = self.initialized.then(|| Hypothesis {
+            pose: self.pose.clone(),
+            backup: false,
+        });
+        let (backups, firsts): (Vec<_>, Vec<_>) = current
+            .into_iter()
+            .chain(problem.hypotheses())
+            .partition(|h| h.backup);
+        for (round, list) in [firsts, backups].into_iter().enumerate() {
+            if round == 1 && best.as_ref().is_some_and(|b| !b.2) {
+                break;
             }
-            let s = problem.frame_stats(&self.loss).score();
-            if best.as_ref().is_none_or(|(b, _)| s < *b) {
-                best = Some((s, pose));
+            for h in list {
+                let mut pose = h.pose;
+                if !problem.solve(&mut pose) || !problem.refresh(&pose) {
+                    continue;
+                }
+                let stats = problem.frame_stats(&self.loss);
+                let s = stats.score();
+                if best.as_ref().is_none_or(|b| s < b.0) {
+                    best = Some((s, pose, stats.is_poor_placement()));
+                }
             }
         }
-        self.pose = best.map_or_else(|| self.fallback.clone(), |(_, p)| p);
+        self.pose = best.map_or_else(|| self.fallback.clone(), |(_, p, _)| p);
         // Leave the problem at the chosen pose for the frame statistics.
         let _ = problem.refresh(&self.pose);
     }
@@ -161,6 +187,8 @@ mod tests {
         at: f64,
         solves: usize,
         cleared: usize,
+        /// Offsets from the target of the hypotheses, and whether each is a backup.
+        starts: Vec<(f64, bool)>,
     }
 
     impl TrackingProblem for Toy {
@@ -180,10 +208,16 @@ mod tests {
             let d = (self.at - self.target).abs();
             FrameStats::from_distances(std::iter::repeat_n(Some(d), 100), p)
         }
-        fn hypotheses(&self) -> Vec<Pose> {
-            vec![Pose {
-                values: vec![self.target + 5.0],
-            }]
+        fn hypotheses(&self) -> Vec<Hypothesis> {
+            self.starts
+                .iter()
+                .map(|&(offset, backup)| Hypothesis {
+                    pose: Pose {
+                        values: vec![self.target + offset],
+                    },
+                    backup,
+                })
+                .collect()
         }
         fn clear_history(&mut self) {
             self.cleared += 1;
@@ -199,6 +233,7 @@ mod tests {
             at: 0.0,
             solves: 0,
             cleared: 0,
+            starts: vec![(5.0, false)],
         };
         assert_eq!(fl.step(&mut toy, 10).flags, ["no_hand"]);
         assert_eq!(fl.step(&mut toy, 500).flags, ["reinitialized"]);
@@ -215,5 +250,31 @@ mod tests {
         assert_eq!(last.flags, ["reinitialized"]);
         assert_eq!(fl.pose.values[0], 100.0);
         assert!(toy.cleared >= 2);
+    }
+
+    /// A backup start is solved only when the other starts leave a poor placement, and then
+    /// wins when it fits better.
+    #[test]
+    fn backups_are_tried_only_after_a_poor_placement() {
+        let mut toy = Toy {
+            target: 0.0,
+            reach: 6.0,
+            at: 0.0,
+            solves: 0,
+            cleared: 0,
+            starts: vec![(5.0, false), (3.0, true)],
+        };
+        let mut fl = FrameLoop::new(Pose { values: vec![0.0] }, LossParams::default());
+        assert_eq!(fl.step(&mut toy, 500).flags, ["reinitialized"]);
+        assert_eq!(
+            toy.solves, 1,
+            "the first start placed the hand: no backup solved"
+        );
+        // Out of the first start's reach, within the backup's.
+        toy.starts = vec![(8.0, false), (3.0, true)];
+        toy.solves = 0;
+        let mut fl = FrameLoop::new(Pose { values: vec![0.0] }, LossParams::default());
+        assert_eq!(fl.step(&mut toy, 500).flags, ["reinitialized"]);
+        assert_eq!((toy.solves, fl.pose.values[0]), (2, 0.0));
     }
 }

@@ -10,7 +10,12 @@
 //! consecutive failed frames. The re-initializer of each tracker solves from a few hypotheses
 //! ([`placement_directions`]) and keeps the best by [`FrameStats::score`].
 
+use std::f64::consts::FRAC_PI_2;
+
 use nalgebra::{Matrix2, SymmetricEigen, Vector2, Vector3};
+
+use crate::kinematics::{Pose, Skeleton};
+use crate::math::{euler_xyz_to_matrix, matrix_to_euler_xyz};
 use serde::{Deserialize, Serialize};
 
 /// When a frame counts as failed and tracking as lost (module docs).
@@ -130,11 +135,65 @@ impl FrameStats {
         self
     }
 
+    /// Whether a fitted re-initialization hypothesis is a poor placement: the frame fails
+    /// ([`FrameStats::failed`]) or the model covers more than [`POOR_PLACEMENT_OUTSIDE`] of the
+    /// silhouette's area outside it.
+    pub fn is_poor_placement(&self) -> bool {
+        self.failed || self.outside > POOR_PLACEMENT_OUTSIDE
+    }
+
     /// Score of a fitted hypothesis (lower is better): mean distance plus a penalty per
     /// unexplained point and per share of model area outside the silhouette.
     pub fn score(&self) -> f64 {
         self.mean_distance + 100.0 * (self.unexplained + self.outside)
     }
+}
+
+/// Rolls of the hand about its finger axis that re-initialization may try at each placement
+/// direction, and whether each is a backup ([`super::Hypothesis::backup`]): the palm toward
+/// the camera, then, should that be a poor placement, edge-on with either side toward it.
+///
+/// A hand first seen edge-on (the occlusion motion turned 88° away, ToF, tracked from its
+/// 150th frame) was placed palm-on, left 35–49 % of the model outside the silhouette and stayed
+/// 80–98 mm off for 45 frames. Tried as equals, the edge-on placements won on fists and claws
+/// instead: the open mean pose fits a fist badly either way, and edge-on it covers less of the
+/// silhouette's outside (the real scans' fist, the hand's own model: 10.2 → 65.4 mm).
+pub const PLACEMENT_ROLLS: [(f64, bool); 3] = [(0.0, false), (FRAC_PI_2, true), (-FRAC_PI_2, true)];
+
+/// A placement leaving more than this share of the silhouette's area covered by the model
+/// outside it is poor ([`FrameStats::is_poor_placement`]). Tracked library sequences leave up to
+/// 0.21 (a template thicker than the hand), a fist placed palm-on as the open mean pose 0.12–0.18,
+/// a hand seen edge-on and placed palm-on 0.36–0.49.
+pub const POOR_PLACEMENT_OUTSIDE: f64 = 0.3;
+
+/// The global rotation, as `(global_rx, global_ry, global_rz)` ([`euler_xyz_to_matrix`]'s
+/// angles), of a hand turned about the optical axis so that its fingers (model +y) point along
+/// the image direction `e`, then rolled by `roll` about the fingers: `Rz(a)·Ry(roll)` with
+/// `Rz(a)·ŷ = e`. `roll = 0` gives exactly `(0, 0, a)`.
+pub fn placement_rotation(e: Vector2<f64>, roll: f64) -> [f64; 3] {
+    let a = (-e.x).atan2(e.y);
+    if roll == 0.0 {
+        return [0.0, 0.0, a];
+    }
+    matrix_to_euler_xyz(&(euler_xyz_to_matrix(0.0, 0.0, a) * euler_xyz_to_matrix(0.0, roll, 0.0)))
+}
+
+/// `pose` with its global rotation set to [`placement_rotation`]`(e, roll)` (its other DOFs
+/// kept); `None` when the skeleton lacks a global rotation DOF.
+pub fn placed_rotation(
+    pose: &Pose,
+    skeleton: &Skeleton,
+    e: Vector2<f64>,
+    roll: f64,
+) -> Option<Pose> {
+    let mut out = pose.clone();
+    for (name, v) in ["global_rx", "global_ry", "global_rz"]
+        .iter()
+        .zip(placement_rotation(e, roll))
+    {
+        out.set(skeleton, name, v).ok()?;
+    }
+    Some(out)
 }
 
 /// Where re-initialization hypotheses put the hand: the point cloud's centroid and the image
@@ -216,5 +275,49 @@ mod tests {
         assert!(dirs[1].x.abs() > 0.99);
         let (_, one) = placement_directions(&[]);
         assert_eq!(one, vec![Vector2::new(0.0, -1.0)]);
+    }
+
+    #[test]
+    fn placements_point_the_fingers_and_roll_about_them() {
+        use crate::math::euler_xyz_to_matrix;
+        use std::f64::consts::PI;
+        let dirs: [Vector2<f64>; 3] = [
+            Vector2::new(0.0, -1.0),
+            Vector2::new(0.6, 0.8),
+            Vector2::new(-1.0, 0.0),
+        ];
+        for e in dirs {
+            let a = (-e.x).atan2(e.y);
+            assert_eq!(placement_rotation(e, 0.0), [0.0, 0.0, a]);
+            for (roll, _) in PLACEMENT_ROLLS {
+                let [x, y, z] = placement_rotation(e, roll);
+                let r = euler_xyz_to_matrix(x, y, z);
+                let fingers = r * Vector3::y();
+                assert!(
+                    (fingers - Vector3::new(e.x, e.y, 0.0)).norm() < 1e-12,
+                    "{e} {roll}"
+                );
+                // The palm normal (model z) turns by the roll away from the optical axis.
+                let normal = r * Vector3::z();
+                assert!((normal.z - roll.cos()).abs() < 1e-12, "{e} {roll}");
+            }
+            // Half a turn about the fingers shows the back of the hand.
+            let [x, y, z] = placement_rotation(e, PI);
+            assert!(((euler_xyz_to_matrix(x, y, z) * Vector3::z()).z + 1.0).abs() < 1e-12);
+        }
+    }
+
+    #[test]
+    fn a_placement_is_poor_when_it_fails_or_covers_much_outside() {
+        let p = LossParams::default();
+        let good = FrameStats::from_distances([Some(2.0); 10].into_iter(), &p);
+        assert!(!good.is_poor_placement());
+        assert!(!good
+            .clone()
+            .with_outside(POOR_PLACEMENT_OUTSIDE)
+            .is_poor_placement());
+        assert!(good.with_outside(0.45).is_poor_placement());
+        let far = FrameStats::from_distances([Some(9.0); 10].into_iter(), &p);
+        assert!(far.is_poor_placement());
     }
 }

@@ -82,13 +82,16 @@ pub mod terms;
 mod tests;
 
 pub use blocks::{PackedBlocks, BLOCK_DOFS, MAX_BLOCKS};
-pub use frame_loop::{FrameLoop, FrameOutcome, TrackingProblem};
+pub use frame_loop::{FrameLoop, FrameOutcome, Hypothesis, TrackingProblem};
 pub use irls::IrlsParams;
 pub use lm::{
     callback_fn, FnCallback, IterInfo, LmCallback, LmError, LmOptions, LmReport, LmSolver,
     LmWorkspace, OptionsError, RePose, TermEnergy, Termination,
 };
-pub use loss::{placement_directions, FrameStats, LossParams};
+pub use loss::{
+    placed_rotation, placement_directions, placement_rotation, FrameStats, LossParams,
+    PLACEMENT_ROLLS, POOR_PLACEMENT_OUTSIDE,
+};
 pub use normal_equations::{NormalEquations, TermStats};
 pub use pca::{
     htrack_groups, parse_htrack_matrix, parse_htrack_vector, read_htrack_matrix,
