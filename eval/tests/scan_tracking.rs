@@ -43,9 +43,9 @@
 //! - Session 25's edge-on placements (tried by the sphere-mesh trackers' re-initialization only
 //!   when the palm-on ones are poor, `hand_model::solver::PLACEMENT_ROLLS`) leave every cell
 //!   as it was. Tried as equals they won here, wrongly: on the fist the hand's own model went
-//!   10.24 → 65.41 mm, on the claw the default template 11.19 → 43.82; and by point distances
-//!   alone (the Ch. 2 tracker, which does not measure the model outside the silhouette) the
-//!   cylinders on pose 3 went 11.16 → 29.17 mm, so that tracker keeps the palm-on starts.
+//!   10.24 → 65.41 mm, on the claw the default template 11.19 → 43.82. The Ch. 2 cylinders
+//!   keep the palm-on starts: with the backups their pose 3 went 11.16 → 29.17 mm, and 40.98
+//!   with the model's area outside the silhouette added to their score (50.59 with that alone).
 //! - Pose 3's folded ring and pinky fingertips are hidden: ≈ 11 mm even with the hand's own
 //!   model.
 //! - Structured light (session 23; the E_d2m comparison is printed, not asserted, for it): the

@@ -266,10 +266,12 @@ impl TrackingProblem for Problem<'_> {
     /// Initial poses from the point cloud: the mean pose with its palm on the cloud's centroid
     /// (10 mm behind the visible surface), fingers along ± the principal image axis of the
     /// cloud, or upright (fingers toward image −y). Palm toward the camera only: the sphere-mesh
-    /// tracker's edge-on backups ([`hand_model::solver::PLACEMENT_ROLLS`]) are chosen by the
-    /// model's area outside the silhouette, which this tracker does not measure; by the point
-    /// distances alone they won on the real scans' two-finger pose, whose palm-on placement
-    /// failed the frame (fingertips 11.2 → 29.2 mm, `eval/tests/scan_tracking.rs`).
+    /// tracker's edge-on backups ([`hand_model::solver::PLACEMENT_ROLLS`]) lost the real scans'
+    /// two-finger pose here (`eval/tests/scan_tracking.rs`, noise-free fingertips 11.16 mm),
+    /// whose palm-on placement fails the frame: 29.17 mm chosen by the point distances alone,
+    /// 40.98 with this model's area outside the silhouette in the score as well (which alone
+    /// already gave 50.59), although on synthetic cold starts they won (ToF occlusion from its
+    /// 150th frame 64.14 → 3.46 mm).
     fn hypotheses(&self) -> Vec<Hypothesis> {
         let (centroid, dirs) = placement_directions(self.ctx.points());
         let target = centroid + Vector3::new(0.0, 0.0, 10.0);

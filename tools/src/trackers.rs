@@ -390,7 +390,7 @@ mod tests {
         assert!(!s.observe(7.5, 7.0), "a fair frame ends the run");
         assert!(!(1..SHADOW_RUN).any(|_| s.observe(13.0, 7.0)));
         assert!(s.observe(13.0, 7.0));
-        assert_eq!(s.frames, 20 + SHADOW_RUN + 1 + SHADOW_RUN);
+        assert_eq!(s.frames, 20 + 2 * SHADOW_RUN);
     }
 
     /// A fist seen from a cold start: the seed places it as the open mean pose and converges

@@ -141,7 +141,8 @@ impl FrameLoop {
     /// Solve from the current pose (when initialized) and every hypothesis, keep the best by
     /// [`FrameStats::score`]; the problem is left refreshed at the chosen pose. The current
     /// pose is always a candidate, so this never makes the fit worse by that measure. The
-    /// backup hypotheses are solved only when the best of the others is a poor placement.
+    /// backup hypotheses are solved only when the best of the others is a poor placement
+    /// ([`FrameStats::is_poor_placement`]), and replace it only with one that is not.
     fn reinitialize(&mut self, problem: &mut impl TrackingProblem) {
         problem.clear_history();
         let mut best: Option<(f64, Pose, bool)> = None;
@@ -164,7 +165,8 @@ impl FrameLoop {
                 }
                 let stats = problem.frame_stats(&self.loss);
                 let s = stats.score();
-                if best.as_ref().is_none_or(|b| s < b.0) {
+                let eligible = round == 0 || !stats.is_poor_placement();
+                if eligible && best.as_ref().is_none_or(|b| s < b.0) {
                     best = Some((s, pose, stats.is_poor_placement()));
                 }
             }
@@ -276,5 +278,10 @@ mod tests {
         let mut fl = FrameLoop::new(Pose { values: vec![0.0] }, LossParams::default());
         assert_eq!(fl.step(&mut toy, 500).flags, ["reinitialized"]);
         assert_eq!((toy.solves, fl.pose.values[0]), (2, 0.0));
+        // Both out of reach: the backup fits a little better but poorly too, and is not taken.
+        toy.starts = vec![(8.0, false), (7.0, true)];
+        let mut fl = FrameLoop::new(Pose { values: vec![0.0] }, LossParams::default());
+        fl.step(&mut toy, 500);
+        assert_eq!(fl.pose.values[0], 8.0);
     }
 }
