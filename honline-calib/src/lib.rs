@@ -210,7 +210,12 @@
 //!   calibration of Ch. 3 reaches 1.01 mm from 8 frames with its per-sphere offsets (2.19 mm
 //!   with β and rest rotations alone): what β lacks is the palm spheres' placement. The random subjects of the acceptance tests live inside β and do not show this.
 //! - Not yet here: loss detection and re-initialization (the first pose comes from
-//!   [`OnlineCalibrator::set_pose`] or the PCA mean placed on the points).
+//!   [`OnlineCalibrator::set_pose`] or the PCA mean placed on the points). `hands track
+//!   --calibrate online` places the hand with the Ch. 3 tracker, which then watches the
+//!   calibrator for 30 frames and restarts it from its own pose with the starting shape should
+//!   it fit clearly worse (flag `shape_reset`, session 25): started on a fist, the calibrator
+//!   otherwise bent its still uncertain shape to the open mean pose it was placed in and kept
+//!   it (ToF `fist` from its 60th frame: 16.57 → 2.80 mm).
 //! - The collision term (Ch. 3) tolerates the overlap the model's pills have at the rest pose;
 //!   that overlap belongs to the shape, so the term is rebuilt on the current β whenever β
 //!   moved. Kept at the starting template's, it counted a thicker-fingered estimate's own rest
