@@ -285,7 +285,7 @@ impl TrackingProblem for Problem<'_> {
 
 impl Problem<'_> {
     /// The mean pose turned about the optical axis so that the fingers (+y) point along the
-    /// image direction `e` and rolled by `roll` about them ([`placement_rotation`]), with the
+    /// image direction `e` and rolled by `roll` about them ([`placed_rotation`]), with the
     /// centroid of the sphere centers on `target`.
     fn placed_mean_pose(&self, e: Vector2<f64>, roll: f64, target: &Vector3<f64>) -> Option<Pose> {
         let t = self.ctx.template();

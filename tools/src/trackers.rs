@@ -116,7 +116,7 @@ pub struct OnlineTracker<'m> {
 /// seed alone 2.01 mm.
 ///
 /// For [`SHADOW_FRAMES`] frames after placing the hand, the seed goes on tracking; when the
-/// calibrator fits clearly worse than the seed ([`FrameStats::score`] above
+/// calibrator fits clearly worse than the seed ([`hand_model::solver::FrameStats::score`] above
 /// [`SHADOW_RATIO`] times the seed's and by more than [`SHADOW_MARGIN`]) for [`SHADOW_RUN`]
 /// frames in a row, the calibrator restarts from the seed's pose with the starting shape and
 /// vague certainty (flag `shape_reset`), and the watch starts over. A calibrator that fits as

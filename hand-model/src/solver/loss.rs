@@ -8,7 +8,9 @@
 //! [`LossParams::max_unexplained`] of them lie farther than
 //! [`LossParams::unexplained_distance`]; tracking is *lost* after [`LossParams::window`]
 //! consecutive failed frames. The re-initializer of each tracker solves from a few hypotheses
-//! ([`placement_directions`]) and keeps the best by [`FrameStats::score`].
+//! ([`placement_directions`]), and from backups ([`PLACEMENT_ROLLS`]) when those place the
+//! hand poorly ([`FrameStats::is_poor_placement`]), and keeps the best by
+//! [`FrameStats::score`].
 
 use std::f64::consts::FRAC_PI_2;
 
@@ -279,7 +281,6 @@ mod tests {
 
     #[test]
     fn placements_point_the_fingers_and_roll_about_them() {
-        use crate::math::euler_xyz_to_matrix;
         use std::f64::consts::PI;
         let dirs: [Vector2<f64>; 3] = [
             Vector2::new(0.0, -1.0),
