@@ -18,14 +18,19 @@ use sensor_io::Camera;
 /// 21 keypoints) of the default hand reshaped to a subject, moving along a library motion.
 ///
 /// Example: `hands synth --motion teaser --frames 600 --noise tof --seed 7 --out seq.mcap --preview sheet.png`
+/// (`--start 2.5` begins 2.5 s into the motion)
 #[derive(Args)]
 pub struct SynthArgs {
     /// Motion name (see `--list`).
     #[arg(long, default_value = "teaser")]
     pub motion: String,
-    /// Number of frames (default: the whole motion).
+    /// Number of frames (default: the whole motion from `--start` on).
     #[arg(long)]
     pub frames: Option<usize>,
+    /// Start this many seconds into the motion (frames are numbered from 0, timestamps are
+    /// the motion's time): a sequence that a tracker meets mid-motion, for cold starts.
+    #[arg(long, default_value_t = 0.0)]
+    pub start: f64,
     /// Frame rate (Hz).
     #[arg(long, default_value_t = 60.0)]
     pub fps: f64,
@@ -69,6 +74,9 @@ pub fn run(args: SynthArgs) -> Result<()> {
     if !(args.fps.is_finite() && args.fps > 0.0 && args.fps <= 1000.0) {
         bail!("--fps must be in (0, 1000], got {}", args.fps);
     }
+    if !(args.start.is_finite() && args.start >= 0.0) {
+        bail!("--start must be a time ≥ 0 s, got {}", args.start);
+    }
     if args.out.is_none() && args.preview.is_none() {
         bail!("nothing to do: give --out <seq.mcap|folder> and/or --preview sheet.png");
     }
@@ -83,9 +91,12 @@ pub fn run(args: SynthArgs) -> Result<()> {
     let template = default_right_hand();
     let subject = subject_by_name(&args.subject, args.seed)?;
     let motion = MotionLibrary::by_name_for(&args.motion, args.seed, &template.skeleton)?;
-    let frames = args.frames.unwrap_or_else(|| motion.num_frames(args.fps));
+    let skipped = (args.start * args.fps).round() as usize;
+    let frames = args
+        .frames
+        .unwrap_or_else(|| motion.num_frames(args.fps).saturating_sub(skipped));
     if frames == 0 || frames > 1_000_000 {
-        bail!("--frames must be in 1..=1000000");
+        bail!("--frames must be in 1..=1000000 (the motion may end before --start)");
     }
     let config = SceneConfig {
         camera: camera.clone(),
@@ -111,7 +122,7 @@ pub fn run(args: SynthArgs) -> Result<()> {
             eprintln!("interrupted after {k} frames; the sequence holds those");
             break;
         }
-        let t = k as f64 / args.fps;
+        let t = args.start + k as f64 / args.fps;
         motion.pose_into(t, &mut pose);
         let t0 = Instant::now();
         let f = synth.render(k as u64, t, &pose)?;

@@ -215,6 +215,41 @@ fn compare_and_eval_score_methods_on_one_sequence() {
     assert!(m["methods"][0]["e_d2m_mm"]["mean"].as_f64().expect("d2m") > 0.0);
 }
 
+/// `--start` begins the sequence that far into the motion: its first frame is the full
+/// sequence's frame at that time (numbered 0, stamped with the motion's time), and a negative
+/// or non-finite start is refused.
+#[test]
+fn synth_starts_mid_motion() {
+    let d = tmp("synth-start");
+    let s = |p: &PathBuf| p.to_str().expect("utf8").to_string();
+    let run = |out: &PathBuf, extra: &[&str]| {
+        let mut args = vec!["synth", "--motion", "occlusion", "--fps", "2", "--out"];
+        let out = s(out);
+        args.push(&out);
+        args.extend_from_slice(extra);
+        let (ok, text) = hands(&args);
+        assert!(ok, "{text}");
+        std::fs::read_to_string(PathBuf::from(&out).join("groundtruth.jsonl"))
+            .expect("gt")
+            .lines()
+            .map(|l| serde_json::from_str::<serde_json::Value>(l).expect("json"))
+            .collect::<Vec<_>>()
+    };
+    let full = run(&d.join("full"), &["--frames", "6"]);
+    let late = run(&d.join("late"), &["--start", "2.5", "--frames", "2"]);
+    assert_eq!(late.len(), 2);
+    assert_eq!(late[0]["frame"], 0);
+    assert_eq!(late[0]["timestamp"], 2.5);
+    assert_eq!(late[0]["pose"], full[5]["pose"]);
+    assert_eq!(late[0]["keypoints"], full[5]["keypoints"]);
+    for bad in ["--start=-1", "--start=NaN"] {
+        assert_fails_clearly(
+            &["synth", bad, "--out", &s(&d.join("bad"))],
+            "--start must be",
+        );
+    }
+}
+
 #[test]
 fn synth_and_convert_round_trip() {
     let d = tmp("synth");
