@@ -1,8 +1,10 @@
 //! The per-iteration queries allocate nothing: `update`, `project_points` and
 //! `project_points_front_facing` (seeded, coherent or neither) and the per-frame
 //! `Coherence::carry_to_pixels` run under a counting global allocator.
-// Implementing `GlobalAlloc` needs `unsafe`; it only forwards to the system allocator.
-#![allow(unsafe_code)]
+#![allow(unsafe_code)] // the counting allocator of the included file
+
+#[path = "support/counting_alloc.rs"]
+mod counting_alloc;
 
 #[path = "../benches/support/hand_like.rs"]
 mod hand_like;
@@ -10,26 +12,6 @@ mod hand_like;
 use hand_like::hand_like_geometry;
 use hand_model::query::{SphereMeshGeometry, View};
 use nalgebra::Vector3;
-use std::alloc::{GlobalAlloc, Layout, System};
-use std::sync::atomic::{AtomicUsize, Ordering};
-
-struct Counting;
-
-static ALLOCATIONS: AtomicUsize = AtomicUsize::new(0);
-
-unsafe impl GlobalAlloc for Counting {
-    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
-        ALLOCATIONS.fetch_add(1, Ordering::SeqCst);
-        unsafe { System.alloc(layout) }
-    }
-
-    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
-        unsafe { System.dealloc(ptr, layout) }
-    }
-}
-
-#[global_allocator]
-static GLOBAL: Counting = Counting;
 
 #[test]
 fn per_iteration_queries_do_not_allocate() {
@@ -74,29 +56,24 @@ fn per_iteration_queries_do_not_allocate() {
     // The coherent state keeps the silhouette of the front-facing calls (allocated once).
     g.project_points_front_facing_coherent(&points, &views[0], &mut coherence, &mut out);
 
-    // This file holds a single test, so nothing else allocates while it runs.
-    let before = ALLOCATIONS.load(Ordering::SeqCst);
-    g.update(&moved).unwrap();
-    coherence.carry_to_pixels(&pixels, 64, 4 * points.len() as u32 / 64 + 1);
-    g.project_points(&points, &mut out);
-    g.project_points_seeded(&points, &mut seeds, &mut out);
-    g.project_points_coherent(&points, &mut coherence, &mut out);
-    for view in &views {
-        g.project_points_front_facing(&points, view, &mut out);
-        g.project_points_front_facing_seeded(&points, view, &mut seeds, &mut out);
-        g.project_points_front_facing_coherent(&points, view, &mut coherence, &mut out);
-    }
-    let single = g.project_front_facing(&points[0], &views[0]);
-    let after = ALLOCATIONS.load(Ordering::SeqCst);
+    let (allocations, single) = counting_alloc::count(|| {
+        g.update(&moved).unwrap();
+        coherence.carry_to_pixels(&pixels, 64, 4 * points.len() as u32 / 64 + 1);
+        g.project_points(&points, &mut out);
+        g.project_points_seeded(&points, &mut seeds, &mut out);
+        g.project_points_coherent(&points, &mut coherence, &mut out);
+        for view in &views {
+            g.project_points_front_facing(&points, view, &mut out);
+            g.project_points_front_facing_seeded(&points, view, &mut seeds, &mut out);
+            g.project_points_front_facing_coherent(&points, view, &mut coherence, &mut out);
+        }
+        g.project_front_facing(&points[0], &views[0])
+    });
     // Some footpoints were back-facing (the silhouette was built): substitutes differ from the
     // plain projections.
     let mut plain = vec![None; points.len()];
     g.project_points(&points, &mut plain);
     assert!(out.iter().zip(&plain).any(|(a, b)| a != b));
     assert!(single.is_some() && out.iter().all(Option::is_some));
-    assert_eq!(
-        after - before,
-        0,
-        "allocations during per-iteration queries"
-    );
+    assert_eq!(allocations, 0, "allocations during per-iteration queries");
 }

@@ -3,10 +3,10 @@
 //! damping), assembly, the Cholesky solve and the pose update. Counted by a global allocator
 //! (per thread, so the test harness does not interfere).
 
-#![allow(unsafe_code)] // the counting allocator below
+#![allow(unsafe_code)] // the counting allocator of the included file
 
-use std::alloc::{GlobalAlloc, Layout, System};
-use std::cell::Cell;
+#[path = "support/counting_alloc.rs"]
+mod counting_alloc;
 
 use hand_model::kinematics::{Pose, PosedSkeleton};
 use hand_model::solver::terms::{
@@ -20,49 +20,9 @@ use hand_model::solver::{
 use hand_model::spheremesh::default_right_hand;
 use nalgebra::DMatrix;
 
-struct Counting;
-
-thread_local! {
-    static ON: Cell<bool> = const { Cell::new(false) };
-    static COUNT: Cell<usize> = const { Cell::new(0) };
-}
-
-fn bump() {
-    let _ = ON.try_with(|on| {
-        if on.get() {
-            COUNT.with(|c| c.set(c.get() + 1));
-        }
-    });
-}
-
-unsafe impl GlobalAlloc for Counting {
-    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
-        bump();
-        unsafe { System.alloc(layout) }
-    }
-    unsafe fn alloc_zeroed(&self, layout: Layout) -> *mut u8 {
-        bump();
-        unsafe { System.alloc_zeroed(layout) }
-    }
-    unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
-        bump();
-        unsafe { System.realloc(ptr, layout, new_size) }
-    }
-    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
-        unsafe { System.dealloc(ptr, layout) }
-    }
-}
-
-#[global_allocator]
-static GLOBAL: Counting = Counting;
-
 /// Allocations made by `f` on this thread.
 fn count(f: impl FnOnce()) -> usize {
-    COUNT.with(|c| c.set(0));
-    ON.with(|on| on.set(true));
-    f();
-    ON.with(|on| on.set(false));
-    COUNT.with(|c| c.get())
+    counting_alloc::count(f).0
 }
 
 /// A deterministic 3+3-latent prior over the default hand's thumb and finger DOFs.

@@ -4,12 +4,11 @@
 //! report's term list) is per frame, none per iteration (correspondences, m2d rendering, term
 //! assembly, solve).
 //!
-//! The only `unsafe` of the workspace: a global allocator cannot be written without it, and it
-//! lives in this test binary alone.
-#![allow(unsafe_code)]
+//! The counting allocator (per thread) is shared with `hand-model`'s allocation tests.
+#![allow(unsafe_code)] // the counting allocator of the included file
 
-use std::alloc::{GlobalAlloc, Layout, System};
-use std::sync::atomic::{AtomicUsize, Ordering};
+#[path = "../../hand-model/tests/support/counting_alloc.rs"]
+mod counting_alloc;
 
 use hand_model::kinematics::Pose;
 use hand_model::solver::PcaPrior;
@@ -17,31 +16,6 @@ use hand_model::spheremesh::default_right_hand;
 use hmodel_spheremesh::synthetic::rendered_frame;
 use hmodel_spheremesh::{M2dMode, Tracker, TrackerConfig};
 use sensor_io::Camera;
-
-struct Counting;
-
-static ALLOCATIONS: AtomicUsize = AtomicUsize::new(0);
-
-// SAFETY: forwards to the system allocator; only counts.
-unsafe impl GlobalAlloc for Counting {
-    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
-        ALLOCATIONS.fetch_add(1, Ordering::Relaxed);
-        // SAFETY: same contract as the caller's.
-        unsafe { System.alloc(layout) }
-    }
-    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
-        // SAFETY: same contract as the caller's.
-        unsafe { System.dealloc(ptr, layout) }
-    }
-    unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
-        ALLOCATIONS.fetch_add(1, Ordering::Relaxed);
-        // SAFETY: same contract as the caller's.
-        unsafe { System.realloc(ptr, layout, new_size) }
-    }
-}
-
-#[global_allocator]
-static GLOBAL: Counting = Counting;
 
 /// Allocations of tracking one warm-started frame with `iterations` LM iterations (after two
 /// warm-up frames that size every buffer).
@@ -73,9 +47,7 @@ fn allocations(iterations: usize, mode: M2dMode) -> usize {
         tracker.track(&frame, i, 0.0);
     }
     tracker.set_pose(&start).unwrap();
-    let before = ALLOCATIONS.load(Ordering::Relaxed);
-    let rec = tracker.track(&frame, 2, 0.0);
-    let n = ALLOCATIONS.load(Ordering::Relaxed) - before;
+    let (n, rec) = counting_alloc::count(|| tracker.track(&frame, 2, 0.0));
     assert!(rec.flags.is_empty(), "{:?}", rec.flags);
     n
 }
