@@ -139,6 +139,24 @@ impl<'m> TrackingCtx<'m> {
         }
     }
 
+    /// The rendered model's area outside the sensor silhouette (`S_r \\ S_s`, the pixels E2D
+    /// pushes) as a fraction of the silhouette's area `|S_s|`, at the last update; `None`
+    /// without a rendered silhouette or with an empty sensor silhouette.
+    pub fn outside_fraction(&self) -> Option<f64> {
+        if !self.silhouette || self.raster.width() == 0 {
+            return None;
+        }
+        let area = self.sensor.silhouette_area();
+        let nearest = &self.sensor.nearest;
+        let outside = self
+            .raster
+            .hits()
+            .iter()
+            .filter(|&&k| nearest.get(k as usize).is_none_or(|&n| n != k))
+            .count();
+        (area > 0).then(|| outside as f64 / area as f64)
+    }
+
     /// Whether [`TrackingCtx::update`] renders the silhouette.
     pub fn silhouette(&self) -> bool {
         self.silhouette

@@ -15,7 +15,12 @@ use crate::{IrlsParams, Tracker, TrackerConfig, TrackingCtx};
 /// The frame the sensor sees of `model` at `pose`: every rendered pixel a point with its pixel,
 /// moved along its ray by Gaussian depth noise of `sigma` mm, and the depth image of those
 /// points (mm, rounded); the silhouette is the rendering's.
-fn noisy_frame(model: &CylinderModel, pose: &Pose, sigma: f64, seed: u64) -> PreprocessedFrame {
+pub(crate) fn noisy_frame(
+    model: &CylinderModel,
+    pose: &Pose,
+    sigma: f64,
+    seed: u64,
+) -> PreprocessedFrame {
     use rand::{Rng, SeedableRng};
     let (raster, mask, dt) = rendered_silhouette(model, pose);
     let cam = sensor_camera();

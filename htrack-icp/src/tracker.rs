@@ -20,9 +20,9 @@ use hand_model::solver::terms::{
     JointLimits, JointLimitsParams, PosePrior, PosePriorParams, Temporal, TemporalParams,
 };
 use hand_model::solver::{
-    cylinder_points, placement_directions, timed_solve, EnergyTerm, FrameLoop, FrameStats,
-    Hypothesis, LmError, LmOptions, LmSolver, LmWorkspace, LossParams, NoTerm, PcaPrior,
-    PriorSetup, SolveTiming, TrackingProblem,
+    cylinder_points, placed_rotation, placement_directions, timed_solve, EnergyTerm, FrameLoop,
+    FrameStats, Hypothesis, LmError, LmOptions, LmSolver, LmWorkspace, LossParams, NoTerm,
+    PcaPrior, PriorSetup, SolveTiming, TrackingProblem, PLACEMENT_ROLLS,
 };
 use nalgebra::{Vector2, Vector3};
 use sensor_io::preprocess::{gate_for_noise, slide_for_noise, NoiseMonitor, PreprocessedFrame};
@@ -112,7 +112,26 @@ pub struct TrackerConfig {
     pub temporal: TemporalParams,
     /// Loss detection.
     pub loss: LossParams,
+    /// A re-initialization placement whose rendered model covers more than this share of the
+    /// sensor silhouette's area outside it is poor, and the edge-on backups are then tried
+    /// ([`PLACEMENT_ROLLS`]; see [`DEFAULT_PLACEMENT_OUTSIDE`]). Needs E2D's rendering (with
+    /// `enabled.e2d` off, or without a camera, every placement is palm-on); infinity: palm-on
+    /// only.
+    pub placement_outside: f64,
 }
+
+/// The default [`TrackerConfig::placement_outside`]. Unlike the sphere-mesh trackers'
+/// [`hand_model::solver::POOR_PLACEMENT_OUTSIDE`] (0.2, or a failed frame), a failed frame alone
+/// does not make a placement poor here: the real scans' two-finger pose fails its palm-on
+/// placements, and an edge-on backup won there wrongly (`eval/tests/scan_tracking.rs`: noise-free
+/// fingertips 11.16 → 29.17 mm). On 74 ToF cold starts (library and random-subject sequences cut
+/// at frames 45–250) the backups took the occlusion motion from 71.08 / 64.14 / 63.71 mm to
+/// 2.76 / 3.46 / 5.09 mm (cut at frames 105 / 150 / 165) and a rotating fist from 14.64 to
+/// 3.91 mm, and cost one random subject's fist 5.91 → 7.76 mm. At 0.2 a rotating fist cut at
+/// frame 150 went 5.65 → 44.42 mm (an edge-on backup taken for a fist); at 0.3 and 0.25 it
+/// went to 3.50; 0.25 also won two more fist cuts. The library's sequences and the real scans
+/// are unchanged.
+pub const DEFAULT_PLACEMENT_OUTSIDE: f64 = 0.25;
 
 impl Default for TrackerConfig {
     fn default() -> Self {
@@ -138,6 +157,7 @@ impl Default for TrackerConfig {
             joint_limits: JointLimitsParams::default(),
             temporal: TemporalParams::default(),
             loss: LossParams::default(),
+            placement_outside: DEFAULT_PLACEMENT_OUTSIDE,
         }
     }
 }
@@ -229,6 +249,8 @@ struct Problem<'m> {
     terms: Terms,
     mean_pose: Pose,
     timing: SolveTiming,
+    /// [`TrackerConfig::placement_outside`].
+    placement_outside: f64,
 }
 
 impl TrackingProblem for Problem<'_> {
@@ -265,25 +287,29 @@ impl TrackingProblem for Problem<'_> {
 
     /// Initial poses from the point cloud: the mean pose with its palm on the cloud's centroid
     /// (10 mm behind the visible surface), fingers along ± the principal image axis of the
-    /// cloud, or upright (fingers toward image −y). Palm toward the camera only: the sphere-mesh
-    /// tracker's edge-on backups ([`hand_model::solver::PLACEMENT_ROLLS`]) lost the real scans'
-    /// two-finger pose here (`eval/tests/scan_tracking.rs`, noise-free fingertips 11.16 mm),
-    /// whose palm-on placement fails the frame: 29.17 mm chosen by the point distances alone,
-    /// 40.98 with this model's area outside the silhouette in the score as well (which alone
-    /// already gave 50.59), although on synthetic cold starts they won (ToF occlusion from its
-    /// 150th frame 64.14 → 3.46 mm).
+    /// cloud, or upright (fingers toward image −y); palm toward the camera, and as backups
+    /// edge-on ([`PLACEMENT_ROLLS`]), as in the sphere-mesh tracker but with this tracker's own
+    /// poor-placement rule ([`Self::is_poor_placement`]).
     fn hypotheses(&self) -> Vec<Hypothesis> {
         let (centroid, dirs) = placement_directions(self.ctx.points());
         let target = centroid + Vector3::new(0.0, 0.0, 10.0);
-        dirs.into_iter()
-            .filter_map(|e| {
-                let pose = self.placed_mean_pose(e, &target)?;
-                Some(Hypothesis {
-                    pose,
-                    backup: false,
-                })
+        PLACEMENT_ROLLS
+            .iter()
+            .flat_map(|&roll| dirs.iter().map(move |&e| (e, roll)))
+            .filter_map(|(e, (roll, backup))| {
+                let pose = self.placed_mean_pose(e, roll, &target)?;
+                Some(Hypothesis { pose, backup })
             })
             .collect()
+    }
+
+    /// Poor when the rendered model covers more than [`TrackerConfig::placement_outside`] of
+    /// the silhouette's area outside it ([`TrackingCtx::outside_fraction`]); a failed frame
+    /// alone is not (see [`DEFAULT_PLACEMENT_OUTSIDE`]).
+    fn is_poor_placement(&self, _stats: &FrameStats) -> bool {
+        self.ctx
+            .outside_fraction()
+            .is_some_and(|o| o > self.placement_outside)
     }
 
     fn clear_history(&mut self) {
@@ -292,15 +318,13 @@ impl TrackingProblem for Problem<'_> {
 }
 
 impl Problem<'_> {
-    /// The mean pose rotated about the optical axis so that the model's +y (fingers) maps to
-    /// the image direction `e`, translated so that the palm center lands on `target`.
-    fn placed_mean_pose(&self, e: Vector2<f64>, target: &Vector3<f64>) -> Option<Pose> {
+    /// The mean pose turned about the optical axis so that the model's +y (fingers) maps to
+    /// the image direction `e` and rolled by `roll` about them ([`placed_rotation`]),
+    /// translated so that the palm center lands on `target`.
+    fn placed_mean_pose(&self, e: Vector2<f64>, roll: f64, target: &Vector3<f64>) -> Option<Pose> {
         let model = self.ctx.model();
         let sk = &model.skeleton;
-        let mut pose = self.mean_pose.clone();
-        // R_z(a)·ŷ = (−sin a, cos a, 0) = e.
-        let a = (-e.x).atan2(e.y);
-        pose.set(sk, "global_rz", a).ok()?;
+        let mut pose = placed_rotation(&self.mean_pose, sk, e, roll)?;
         let posed = PosedSkeleton::new(sk, &pose);
         let palm = model
             .segments
@@ -374,6 +398,7 @@ impl<'m> Tracker<'m> {
                 terms,
                 mean_pose,
                 timing: SolveTiming::default(),
+                placement_outside: config.placement_outside,
             },
             config,
         })

@@ -18,6 +18,12 @@ pub trait TrackingProblem {
     fn frame_stats(&self, params: &LossParams) -> FrameStats;
     /// Initial poses placed on the current frame's data.
     fn hypotheses(&self) -> Vec<Hypothesis>;
+    /// Whether a solved hypothesis with these statistics (from [`Self::frame_stats`] at its
+    /// refreshed pose) is a poor placement, which lets the backups be tried: by default
+    /// [`FrameStats::is_poor_placement`].
+    fn is_poor_placement(&self, stats: &FrameStats) -> bool {
+        stats.is_poor_placement()
+    }
     /// Forget the temporal history (after a re-initialization or a frame without a hand).
     fn clear_history(&mut self);
 }
@@ -165,9 +171,9 @@ impl FrameLoop {
                 }
                 let stats = problem.frame_stats(&self.loss);
                 let s = stats.score();
-                let eligible = round == 0 || !stats.is_poor_placement();
-                if eligible && best.as_ref().is_none_or(|b| s < b.0) {
-                    best = Some((s, pose, stats.is_poor_placement()));
+                let poor = problem.is_poor_placement(&stats);
+                if (round == 0 || !poor) && best.as_ref().is_none_or(|b| s < b.0) {
+                    best = Some((s, pose, poor));
                 }
             }
         }
