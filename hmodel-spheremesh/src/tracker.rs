@@ -12,9 +12,9 @@ use hand_model::solver::terms::{
     JointLimits, JointLimitsParams, PosePrior, PosePriorParams, Temporal, TemporalParams,
 };
 use hand_model::solver::{
-    placed_rotation, placement_directions, sphere_mesh_points, timed_solve, EnergyTerm, FrameLoop,
+    placed_rotation, placement_hypotheses, sphere_mesh_points, timed_solve, EnergyTerm, FrameLoop,
     FrameStats, Hypothesis, IrlsParams, LmError, LmOptions, LmSolver, LmWorkspace, LossParams,
-    NoTerm, PcaPrior, PriorSetup, SolveTiming, TrackingProblem, PLACEMENT_ROLLS,
+    NoTerm, PcaPrior, PriorSetup, SolveTiming, TrackingProblem,
 };
 use hand_model::spheremesh::{PosedSphereMesh, SphereMeshTemplate};
 use nalgebra::{Vector2, Vector3};
@@ -266,16 +266,9 @@ impl TrackingProblem for Problem<'_> {
     }
 
     fn hypotheses(&self) -> Vec<Hypothesis> {
-        let (centroid, dirs) = placement_directions(self.ctx.points());
-        let target = centroid + Vector3::new(0.0, 0.0, 10.0);
-        PLACEMENT_ROLLS
-            .iter()
-            .flat_map(|&roll| dirs.iter().map(move |&e| (e, roll)))
-            .filter_map(|(e, (roll, backup))| {
-                let pose = self.placed_mean_pose(e, roll, &target)?;
-                Some(Hypothesis { pose, backup })
-            })
-            .collect()
+        placement_hypotheses(self.ctx.points(), |e, roll, target| {
+            self.placed_mean_pose(e, roll, target)
+        })
     }
 
     fn clear_history(&mut self) {

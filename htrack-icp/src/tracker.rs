@@ -20,9 +20,9 @@ use hand_model::solver::terms::{
     JointLimits, JointLimitsParams, PosePrior, PosePriorParams, Temporal, TemporalParams,
 };
 use hand_model::solver::{
-    cylinder_points, placed_rotation, placement_directions, timed_solve, EnergyTerm, FrameLoop,
+    cylinder_points, placed_rotation, placement_hypotheses, timed_solve, EnergyTerm, FrameLoop,
     FrameStats, Hypothesis, LmError, LmOptions, LmSolver, LmWorkspace, LossParams, NoTerm,
-    PcaPrior, PriorSetup, SolveTiming, TrackingProblem, PLACEMENT_ROLLS,
+    PcaPrior, PriorSetup, SolveTiming, TrackingProblem,
 };
 use nalgebra::{Vector2, Vector3};
 use sensor_io::preprocess::{gate_for_noise, slide_for_noise, NoiseMonitor, PreprocessedFrame};
@@ -114,9 +114,9 @@ pub struct TrackerConfig {
     pub loss: LossParams,
     /// A re-initialization placement whose rendered model covers more than this share of the
     /// sensor silhouette's area outside it is poor, and the edge-on backups are then tried
-    /// ([`PLACEMENT_ROLLS`]; see [`DEFAULT_PLACEMENT_OUTSIDE`]). Needs E2D's rendering (with
-    /// `enabled.e2d` off, or without a camera, every placement is palm-on); infinity: palm-on
-    /// only.
+    /// ([`PLACEMENT_ROLLS`](hand_model::solver::PLACEMENT_ROLLS); see
+    /// [`DEFAULT_PLACEMENT_OUTSIDE`]). Needs E2D's rendering (with `enabled.e2d` off, or
+    /// without a camera, every placement is palm-on); infinity: palm-on only.
     pub placement_outside: f64,
 }
 
@@ -285,22 +285,15 @@ impl TrackingProblem for Problem<'_> {
         FrameStats::from_distances(distances, params)
     }
 
-    /// Initial poses from the point cloud: the mean pose with its palm on the cloud's centroid
-    /// (10 mm behind the visible surface), fingers along ± the principal image axis of the
-    /// cloud, or upright (fingers toward image −y); palm toward the camera, and as backups
-    /// edge-on ([`PLACEMENT_ROLLS`]), as in the sphere-mesh tracker but with this tracker's own
+    /// Initial poses from the point cloud ([`placement_hypotheses`]): the mean pose with its
+    /// palm center 10 mm behind the cloud's centroid, fingers along ± the principal image axis
+    /// of the cloud, or upright (fingers toward image −y); palm toward the camera, and as
+    /// backups edge-on, as in the sphere-mesh tracker but with this tracker's own
     /// poor-placement rule ([`Self::is_poor_placement`]).
     fn hypotheses(&self) -> Vec<Hypothesis> {
-        let (centroid, dirs) = placement_directions(self.ctx.points());
-        let target = centroid + Vector3::new(0.0, 0.0, 10.0);
-        PLACEMENT_ROLLS
-            .iter()
-            .flat_map(|&roll| dirs.iter().map(move |&e| (e, roll)))
-            .filter_map(|(e, (roll, backup))| {
-                let pose = self.placed_mean_pose(e, roll, &target)?;
-                Some(Hypothesis { pose, backup })
-            })
-            .collect()
+        placement_hypotheses(self.ctx.points(), |e, roll, target| {
+            self.placed_mean_pose(e, roll, target)
+        })
     }
 
     /// Poor when the rendered model covers more than [`TrackerConfig::placement_outside`] of

@@ -16,6 +16,7 @@ use std::f64::consts::FRAC_PI_2;
 
 use nalgebra::{Matrix2, SymmetricEigen, Vector2, Vector3};
 
+use super::frame_loop::Hypothesis;
 use crate::kinematics::{Pose, Skeleton};
 use crate::math::{euler_xyz_to_matrix, matrix_to_euler_xyz};
 use serde::{Deserialize, Serialize};
@@ -229,9 +230,58 @@ pub fn placement_directions(points: &[Vector3<f64>]) -> (Vector3<f64>, Vec<Vecto
     (centroid, dirs)
 }
 
+/// The re-initialization starts on a frame's points: for every roll of [`PLACEMENT_ROLLS`]
+/// (a backup or not, as it says) and every direction of [`placement_directions`], the pose
+/// `place(e, roll, target)` builds with the fingers along the image direction `e`, rolled by
+/// `roll` about them, and the palm on `target`, 10 mm behind the cloud's centroid (inside the
+/// hand rather than on its visible surface). Directions where `place` gives `None` are left out.
+pub fn placement_hypotheses(
+    points: &[Vector3<f64>],
+    place: impl Fn(Vector2<f64>, f64, &Vector3<f64>) -> Option<Pose>,
+) -> Vec<Hypothesis> {
+    let (centroid, dirs) = placement_directions(points);
+    let target = centroid + Vector3::new(0.0, 0.0, 10.0);
+    PLACEMENT_ROLLS
+        .iter()
+        .flat_map(|&roll| dirs.iter().map(move |&e| (e, roll)))
+        .filter_map(|(e, (roll, backup))| {
+            let pose = place(e, roll, &target)?;
+            Some(Hypothesis { pose, backup })
+        })
+        .collect()
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn hypotheses_cover_every_direction_and_roll_with_the_palm_behind_the_centroid() {
+        let points: Vec<_> = (0..20)
+            .map(|i| Vector3::new(3.0 * f64::from(i), 1.0, 400.0 + f64::from(i % 2)))
+            .collect();
+        let (centroid, dirs) = placement_directions(&points);
+        assert_eq!(dirs.len(), 3);
+        // A "pose" recording what it was built from: e, roll, target.
+        let hs = placement_hypotheses(&points, |e, roll, target| {
+            (e.x != 0.0 || roll >= 0.0).then(|| Pose {
+                values: vec![e.x, e.y, roll, target.x, target.y, target.z],
+            })
+        });
+        // Upright (e.x = 0) with the negative roll is refused by `place`: left out.
+        assert_eq!(hs.len(), PLACEMENT_ROLLS.len() * dirs.len() - 1);
+        for h in &hs {
+            let v = &h.pose.values;
+            let roll = PLACEMENT_ROLLS.iter().find(|r| r.0 == v[2]).unwrap();
+            assert_eq!(h.backup, roll.1);
+            assert!(dirs.contains(&Vector2::new(v[0], v[1])));
+            assert_eq!(
+                [v[3], v[4], v[5]],
+                [centroid.x, centroid.y, centroid.z + 10.0]
+            );
+        }
+        assert_eq!(hs.iter().filter(|h| !h.backup).count(), dirs.len());
+    }
 
     #[test]
     fn stats_count_unexplained_and_missing_points() {

@@ -89,8 +89,8 @@ pub use lm::{
     LmWorkspace, OptionsError, RePose, TermEnergy, Termination,
 };
 pub use loss::{
-    placed_rotation, placement_directions, placement_rotation, FrameStats, LossParams,
-    PLACEMENT_ROLLS, POOR_PLACEMENT_OUTSIDE,
+    placed_rotation, placement_directions, placement_hypotheses, placement_rotation, FrameStats,
+    LossParams, PLACEMENT_ROLLS, POOR_PLACEMENT_OUTSIDE,
 };
 pub use normal_equations::{NormalEquations, TermStats};
 pub use pca::{
