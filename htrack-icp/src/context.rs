@@ -139,7 +139,7 @@ impl<'m> TrackingCtx<'m> {
         }
     }
 
-    /// The rendered model's area outside the sensor silhouette (`S_r \\ S_s`, the pixels E2D
+    /// The rendered model's area outside the sensor silhouette (`S_r \ S_s`, the pixels E2D
     /// pushes) as a fraction of the silhouette's area `|S_s|`, at the last update; `None`
     /// without a rendered silhouette or with an empty sensor silhouette.
     pub fn outside_fraction(&self) -> Option<f64> {

@@ -32,9 +32,9 @@
 //! teaser σ = 7 mm 2.74 → 1.88, σ = 10 mm 7.34 → 2.65; occlusion σ = 10 mm 17.69 → 5.41 mm;
 //! the ToF teaser and occlusion unchanged (1.85, 2.26 mm).
 //!
-//! Re-initialization (beyond the thesis, session 26): when every palm-on placement leaves more
-//! than a quarter of the silhouette's area covered by the model outside it, edge-on placements
-//! are tried as backups ([`DEFAULT_PLACEMENT_OUTSIDE`]). A hand first seen edge-on was
+//! Re-initialization (beyond the thesis, session 26): when the best-scoring palm-on start (or
+//! the pose tracked so far) leaves more than a quarter of the silhouette's area covered by the
+//! model outside it, edge-on placements are tried as backups ([`DEFAULT_PLACEMENT_OUTSIDE`]). A hand first seen edge-on was
 //! otherwise placed palm-on and tracked 64–71 mm off (ToF occlusion motion from a cold start).
 //!
 //! The priors (joint limits, damping, temporal, PCA pose prior) are the shared terms of
