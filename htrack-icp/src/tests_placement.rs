@@ -96,3 +96,24 @@ fn outside_fraction_is_the_rendered_area_outside_the_silhouette() {
     ctx.update(&moved, false).unwrap();
     assert_eq!(ctx.outside_fraction(), None);
 }
+
+/// A placement threshold that is not a share (negative or NaN) is refused, naming the field.
+#[test]
+fn an_absurd_placement_threshold_is_refused() {
+    let model = default_right_hand_cylinders();
+    for bad in [-0.1, f64::NAN, f64::NEG_INFINITY] {
+        let config = TrackerConfig {
+            placement_outside: bad,
+            ..TrackerConfig::default()
+        };
+        let err = Tracker::new(&model, config, None).err().expect("refused");
+        assert!(err.to_string().contains("placement_outside"), "{err}");
+    }
+    for good in [0.0, 0.25, f64::INFINITY] {
+        let config = TrackerConfig {
+            placement_outside: good,
+            ..TrackerConfig::default()
+        };
+        assert!(Tracker::new(&model, config, None).is_ok());
+    }
+}

@@ -351,12 +351,23 @@ pub struct Tracker<'m> {
 
 impl<'m> Tracker<'m> {
     /// A tracker of `model` with `config` and an optional PCA pose prior (E_pose is skipped
-    /// without one). The prior's mean also gives the initial finger pose (§2.3.2).
+    /// without one). The prior's mean also gives the initial finger pose (§2.3.2). A negative
+    /// or NaN [`TrackerConfig::placement_outside`] is an error.
     pub fn new(
         model: &'m CylinderModel,
         config: TrackerConfig,
         prior: Option<&PcaPrior>,
     ) -> Result<Self, TrackerError> {
+        if config.placement_outside.is_nan() || config.placement_outside < 0.0 {
+            return Err(hand_model::ModelError::InvalidArgument {
+                name: "placement_outside",
+                reason: format!(
+                    "must be a share ≥ 0 (infinity: palm-on placements only), got {}",
+                    config.placement_outside
+                ),
+            }
+            .into());
+        }
         let sk = &model.skeleton;
         let mut ctx = TrackingCtx::new(model, View::Orthographic, config.irls.clone());
         ctx.set_front_facing(config.front_facing);
