@@ -154,6 +154,17 @@ impl Camera {
         }
     }
 
+    /// The weight of one silhouette push (a model pixel outside the sensor silhouette: htrack's
+    /// E2D, Eq. 2.3; hmodel's E_m2d, Eq. 3.5) in an image this wide, relative to one in a
+    /// 320-pixel-wide image, the resolution at which the originals ran (they downsampled
+    /// 640 × 480 frames to 320 × 240, ANCHOR-FACTS §0, §8) and their weights were set:
+    /// `(320 / width)⁴`. At twice the resolution a silhouette has four times the pushes, each
+    /// twice as long in pixels, so the term's share of the normal equations would grow
+    /// sixteenfold against the fixed number of sensor points of the 3D term.
+    pub fn qvga_share(&self) -> f64 {
+        (320.0 / f64::from(self.width.max(1))).powi(4)
+    }
+
     /// Pixel (u, v) of a camera-frame point (z > 0).
     #[inline]
     pub fn project(&self, p: &Vector3<f64>) -> Vector2<f64> {
@@ -195,6 +206,15 @@ impl Camera {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Twice the resolution: four times the pushes, each twice as long in pixels.
+    #[test]
+    fn silhouette_pushes_weigh_as_in_a_320_pixel_wide_image() {
+        let with_width = |w: u32| Camera::new("t", w, w * 3 / 4, 300.0, 300.0, 1.0, 1.0).unwrap();
+        assert_eq!(with_width(320).qvga_share(), 1.0);
+        assert_eq!(with_width(640).qvga_share(), 1.0 / 16.0);
+        assert_eq!(with_width(160).qvga_share(), 16.0);
+    }
 
     #[test]
     fn projection_round_trip_and_jacobian() {

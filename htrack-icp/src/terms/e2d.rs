@@ -21,19 +21,6 @@ impl Default for E2dParams {
     }
 }
 
-/// The weight of one push of an image `width` pixels wide relative to one of a 320-pixel-wide
-/// image, the resolution at which the originals ran (they downsampled 640 × 480 frames to
-/// 320 × 240, ANCHOR-FACTS §0, §8) and ω₂ was set: `(320 / width)⁴`. At twice the resolution a
-/// silhouette has four times the pushes, each twice as long in pixels, so E2D's share of the
-/// normal equations would grow sixteenfold against E3D's fixed number of points. Measured in
-/// session 24 (`hands track --model cylinders`, teaser, 240 frames, NYU camera 640 × 480,
-/// mean keypoint error): default hand noise-free 1.17 → 1.19 mm, ToF 2.41 → 1.72 mm; a random
-/// subject under ToF 13.79 → 5.31 mm (through the 320 × 240 SR300 preset 5.78 mm; ω₂ / 4
-/// instead gave 7.07 mm).
-fn qvga_share(width: u32) -> f64 {
-    (320.0 / f64::from(width.max(1))).powi(4)
-}
-
 /// Most DOFs on one bone's chain (the cylinder skeleton has at most 6 + 4).
 const MAX_CHAIN: usize = 64;
 
@@ -54,7 +41,11 @@ pub struct SilhouettePush {
 /// E2D, thesis Eq. 2.3: `E2D = ω₂ Σ_{p ∈ S_r} ‖p − Π_{S_s}(p, θ)‖²`, the rendered silhouette
 /// `S_r` of the model pushed into the sensor silhouette `S_s`. Each push weighs
 /// `ω₂ · (320 / width)⁴`: ω₂ holds for the 320 × 240 frames the originals tracked, and wider
-/// images count in proportion (see `qvga_share`).
+/// images count in proportion ([`sensor_io::Camera::qvga_share`]). Measured in session 24
+/// (`hands track --model cylinders`, teaser, 240 frames, NYU camera 640 × 480, mean keypoint
+/// error): default hand noise-free 1.17 → 1.19 mm, ToF 2.41 → 1.72 mm; a random subject under
+/// ToF 13.79 → 5.31 mm (through the 320 × 240 SR300 preset 5.78 mm; ω₂ / 4 instead gave
+/// 7.07 mm).
 ///
 /// As in htrack (ANCHOR-FACTS §5.4) only rendered pixels **outside** `S_s` contribute (inside,
 /// `Π_{S_s}(p) = p`); each gives two rows (pixels), with the correspondence `Π_{S_s}(p)` the
@@ -174,7 +165,7 @@ impl EnergyTerm<TrackingCtx<'_>> for E2d {
         };
         let skeleton = ctx.skeleton();
         let posed = ctx.posed();
-        let omega = self.params.weight * qvga_share(camera.width);
+        let omega = self.params.weight * camera.qvga_share();
         let bones = skeleton.bones().len();
         let mut cu = [(0usize, 0.0f64); MAX_CHAIN];
         let mut cv = [(0usize, 0.0f64); MAX_CHAIN];
@@ -203,19 +194,5 @@ impl EnergyTerm<TrackingCtx<'_>> for E2d {
             Ok(())
         })?;
         Ok(stats)
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::qvga_share;
-
-    /// Twice the resolution: four times the pushes, each twice as long in pixels.
-    #[test]
-    fn pushes_weigh_as_in_a_320_pixel_wide_image() {
-        assert_eq!(qvga_share(320), 1.0);
-        assert_eq!(qvga_share(640), 1.0 / 16.0);
-        assert_eq!(qvga_share(160), 16.0);
-        assert!(qvga_share(0).is_finite());
     }
 }
