@@ -512,7 +512,8 @@ impl ShapeRows {
     }
 
     /// Add the d2m rows (Eq. 3.11 / Eq. 3.4: `r = −‖p − q‖`, row `uᵀ∂q/∂x`, IRLS weight) and the
-    /// m2d rows (Eq. 3.12 / Eq. 3.5: two pixel rows `J_π ∂x/∂x` per push) of the frame held by
+    /// m2d rows (Eq. 3.12 / Eq. 3.5: two pixel rows `J_π ∂x/∂x` per push, each weighing as in
+    /// [`crate::terms::M2d`], `(320 / width)⁴` included) of the frame held by
     /// `ctx` (already updated at the frame's pose) to `ne`, over the pose DOFs at
     /// `layout.pose` and the shape unknowns mapped by `layout.shape`. The data information
     /// `Σ w j²` of each system unknown `k ≥ info_from` is added to `info[k − info_from]` (an empty
@@ -549,7 +550,7 @@ impl ShapeRows {
             out.rows += 1;
         }
         if let Some(camera) = ctx.sensor().camera.as_ref() {
-            let w = weights.m2d * ctx.m2d_pixel_weight();
+            let w = weights.m2d * ctx.m2d_pixel_weight() * camera.qvga_share();
             let posed = ctx.posed_mesh();
             for push in ctx.pushes() {
                 let x = &push.point;
