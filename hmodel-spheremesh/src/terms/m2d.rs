@@ -38,7 +38,7 @@ impl Default for M2dParams {
 ///   occlusion 1.64 / 10.9 → 1.51 / 5.6, rotation_fast 1.46 / 8.1 → 1.18 / 2.8. Random
 ///   subjects on the default template moved 4.72 → 5.11 and 9.26 → 9.61 mm, their worst frames
 ///   15.3 → 6.8 and 17.5 → 11.3 mm. Online calibration, whose joint pose–shape rows weigh the
-///   same (`calibration::rows`), summed over the six 9.28 → 8.53 mm, its worst frames
+///   same (`calibration::rows`), summed over these six sequences 9.28 → 8.53 mm, its worst frames
 ///   6.0–14.2 → 2.0–6.6 mm (crossed fingers 1.81 → 1.98 mm, a random subject under structured
 ///   light 1.05 → 0.58). The ToF occlusion motion from a cold start at its 150th frame:
 ///   10.81 → 4.43 mm, online 28.90 → 7.60.
