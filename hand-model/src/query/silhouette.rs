@@ -106,30 +106,6 @@ impl Piece {
         }
     }
 
-    /// The squared distance from `p` to the whole piece (its full great circle, or its whole
-    /// segment): a lower bound for the distance to any of its visible parts, found without
-    /// clipping it.
-    pub(crate) fn distance2_lower_bound(
-        &self,
-        centers: &[Vector3<f64>],
-        radii: &[f64],
-        basis: &ViewBasis,
-        p: &Vector3<f64>,
-    ) -> f64 {
-        match *self {
-            Piece::Arc { sphere, .. } => {
-                let d = p - centers[sphere as usize];
-                let planar = basis.flatten(&d).norm_squared();
-                let off_plane = (d.norm_squared() - planar).max(0.0);
-                (planar.sqrt() - radii[sphere as usize]).powi(2) + off_plane
-            }
-            Piece::Segment { .. } => {
-                let (a, ab, foot) = self.segment_foot(centers, radii, p).unwrap_or_default();
-                (p - a - ab * foot.clamp(0.0, 1.0)).norm_squared()
-            }
-        }
-    }
-
     /// A segment piece's generator `x(t) = a + t·ab` as `(a, ab)` and the parameter `t` of the
     /// foot of `p` on its line (unclamped; 0 for a degenerate segment); `None` for an arc.
     pub(crate) fn segment_foot(
@@ -441,47 +417,5 @@ mod tests {
             );
         }
         assert_eq!(active_arcs(&flat, &[1.0, 5.0, 1.0], 0).1, 1);
-    }
-
-    #[test]
-    fn lower_bound_is_below_every_point_of_the_piece_and_tight_on_it() {
-        let centers = [
-            Vector3::new(0.0, 0.0, 0.0),
-            Vector3::new(30.0, 4.0, -6.0),
-            Vector3::new(8.0, 25.0, 3.0),
-        ];
-        let radii = [9.0, 5.0, 7.0];
-        let basis = ViewBasis::new(Vector3::new(0.3, -0.2, 1.0).normalize());
-        let mut out = [Piece::Arc {
-            sphere: 0,
-            lo: 0.0,
-            hi: 0.0,
-        }; MAX_ELEMENT_PIECES];
-        let n = element_pieces(&centers, &radii, &basis, &mut out);
-        assert!(n >= 4, "{n} pieces");
-        for piece in &out[..n] {
-            let (lo, hi) = piece.range();
-            let samples: Vec<Vector3<f64>> = (0..=400)
-                .map(|k| {
-                    let s = lo + (hi - lo) * f64::from(k) / 400.0;
-                    piece.at(&centers, &radii, &basis, s).point
-                })
-                .collect();
-            // A lattice over a cube around the element, off the sampled points.
-            let axis = |k: usize| -35.3 + 12.7 * k as f64;
-            for k in 0..343 {
-                let p = Vector3::new(axis(k % 7), axis(k / 7 % 7), axis(k / 49) - 5.0);
-                let lower = piece.distance2_lower_bound(&centers, &radii, &basis, &p);
-                let brute = samples
-                    .iter()
-                    .map(|x| (p - x).norm_squared())
-                    .fold(f64::INFINITY, f64::min);
-                assert!(lower <= brute * (1.0 + 1e-12), "{lower} > {brute}");
-            }
-            for x in &samples {
-                let lower = piece.distance2_lower_bound(&centers, &radii, &basis, x);
-                assert!(lower < 1e-9, "{lower} mm² from a point of the piece");
-            }
-        }
     }
 }

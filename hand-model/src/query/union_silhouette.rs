@@ -16,7 +16,7 @@
 //! piece by piece as queries reach them, and kept on the stack: at most [`MAX_PIECES`] pieces
 //! with [`MAX_VISIBLE`] visible ranges each.
 
-use super::geometry::SphereMeshGeometry;
+use super::geometry::{ElementFrame, SphereMeshGeometry};
 use super::silhouette::{
     element_pieces, sphere_arcs, Piece, PiecePoint, ViewBasis, MAX_ELEMENT_PIECES,
 };
@@ -235,57 +235,121 @@ struct Nearest<'a> {
 }
 
 impl Nearest<'_> {
+    /// Offers the nearest visible point of each of `pieces`, nearest pieces first (by the
+    /// nearest point of the whole piece), [`MAX_ELEMENT_PIECES`] at a time: a piece whose whole
+    /// nearest point is visible needs no clipping, and once one is found the pieces behind it
+    /// need nothing at all.
     fn scan(&mut self, pieces: &mut [VisiblePiece]) {
-        let p = self.p;
-        for vp in pieces {
-            let [x, y, z, r] = vp.bound;
-            let reach = r + self.reach;
-            if (p - Vector3::new(x, y, z)).norm_squared() >= reach * reach {
-                continue;
-            }
-            let frame = &self.g.frames[vp.element as usize];
-            let (centers, radii) = (frame.centers(), frame.radii());
-            if vp.n_visible == UNCLIPPED {
-                // Clipping costs tens of µs: not for a piece that cannot come nearer than the
-                // best so far (the margin covers rounding, so the answer is the same).
-                let lower = vp
-                    .piece
-                    .distance2_lower_bound(centers, radii, &self.basis, p);
-                if lower * (1.0 - 1e-9) >= self.bound_d2 {
+        for chunk in pieces.chunks_mut(MAX_ELEMENT_PIECES) {
+            let mut order = [(0.0, 0, PiecePoint::default()); MAX_ELEMENT_PIECES];
+            let mut n = 0;
+            for (k, vp) in chunk.iter().enumerate() {
+                let [x, y, z, r] = vp.bound;
+                let reach = r + self.reach;
+                if (self.p - Vector3::new(x, y, z)).norm_squared() >= reach * reach {
                     continue;
                 }
-                clip(self.g, vp.element as usize, &self.basis, self.tol, vp);
+                let frame = &self.g.frames[vp.element as usize];
+                let (lo, hi) = vp.piece.range();
+                let whole = [Span::new(&vp.piece, lo, hi)];
+                let (centers, radii) = (frame.centers(), frame.radii());
+                let point = nearest_on(&vp.piece, &whole, centers, radii, &self.basis, self.p);
+                order[n] = ((self.p - point.point).norm_squared(), k, point);
+                n += 1;
             }
-            if vp.n_visible == 0 {
-                continue;
-            }
-            let spans = &vp.visible[..vp.n_visible as usize];
-            let point = match vp.piece {
-                Piece::Arc { sphere, .. } => {
-                    let u = self.basis.flatten(&(p - centers[sphere as usize]));
-                    let d = nearest_direction(spans, u);
-                    Piece::arc_at_direction(sphere, centers, radii, &self.basis, &d)
+            let order = &mut order[..n];
+            order.sort_unstable_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
+            for &(d2, k, point) in order.iter() {
+                if d2 >= self.bound_d2 {
+                    break;
                 }
-                Piece::Segment { .. } => {
-                    let (_, _, foot) = vp.piece.segment_foot(centers, radii, p).unwrap_or_default();
-                    let mut t = foot;
-                    let mut gap = f64::INFINITY;
-                    for s in spans {
-                        let c = foot.clamp(s.a, s.b);
-                        if (c - foot).abs() < gap {
-                            gap = (c - foot).abs();
-                            t = c;
-                        }
-                    }
-                    vp.piece.at(centers, radii, &self.basis, t)
-                }
-            };
-            let d2 = (p - point.point).norm_squared();
-            if d2 < self.bound_d2 {
-                self.bound_d2 = d2;
-                self.reach = d2.sqrt();
-                self.best = Some((d2, vp.element as usize, point));
+                self.visit(&mut chunk[k], point);
             }
+        }
+    }
+
+    /// Offers the nearest visible point of `vp`, given the nearest point of the whole piece,
+    /// clipping the piece only when that point is buried.
+    fn visit(&mut self, vp: &mut VisiblePiece, whole: PiecePoint) {
+        let own = vp.element as usize;
+        if vp.n_visible == UNCLIPPED {
+            if visible_at(self.g, own, &self.basis, self.tol, vp, &whole) {
+                self.offer(vp, whole);
+                return;
+            }
+            clip(self.g, own, &self.basis, self.tol, vp);
+        }
+        if vp.n_visible == 0 {
+            return;
+        }
+        let frame = &self.g.frames[own];
+        let spans = &vp.visible[..vp.n_visible as usize];
+        let (centers, radii) = (frame.centers(), frame.radii());
+        let point = nearest_on(&vp.piece, spans, centers, radii, &self.basis, self.p);
+        self.offer(vp, point);
+    }
+
+    /// Keeps `point` of `vp` if it is the nearest so far.
+    fn offer(&mut self, vp: &VisiblePiece, point: PiecePoint) {
+        let d2 = (self.p - point.point).norm_squared();
+        if d2 < self.bound_d2 {
+            self.bound_d2 = d2;
+            self.reach = d2.sqrt();
+            self.best = Some((d2, vp.element as usize, point));
+        }
+    }
+}
+
+impl Span {
+    /// The range `[a, b]` of `piece` (with its end directions for an arc).
+    fn new(piece: &Piece, a: f64, b: f64) -> Self {
+        let dir = |t: f64| {
+            let (sin, cos) = t.sin_cos();
+            Vector2::new(cos, sin)
+        };
+        match piece {
+            Piece::Arc { .. } => Span {
+                a,
+                b,
+                da: dir(a),
+                db: dir(b),
+            },
+            Piece::Segment { .. } => Span {
+                a,
+                b,
+                ..Span::default()
+            },
+        }
+    }
+}
+
+/// The point of `piece`'s `spans` (parameter ranges) nearest to `p`.
+fn nearest_on(
+    piece: &Piece,
+    spans: &[Span],
+    centers: &[Vector3<f64>],
+    radii: &[f64],
+    basis: &ViewBasis,
+    p: &Vector3<f64>,
+) -> PiecePoint {
+    match *piece {
+        Piece::Arc { sphere, .. } => {
+            let u = basis.flatten(&(p - centers[sphere as usize]));
+            let d = nearest_direction(spans, u);
+            Piece::arc_at_direction(sphere, centers, radii, basis, &d)
+        }
+        Piece::Segment { .. } => {
+            let (_, _, foot) = piece.segment_foot(centers, radii, p).unwrap_or_default();
+            let mut t = foot;
+            let mut gap = f64::INFINITY;
+            for s in spans {
+                let c = foot.clamp(s.a, s.b);
+                if (c - foot).abs() < gap {
+                    gap = (c - foot).abs();
+                    t = c;
+                }
+            }
+            piece.at(centers, radii, basis, t)
         }
     }
 }
@@ -324,64 +388,123 @@ fn nearest_direction(spans: &[Span], u: Vector2<f64>) -> Vector2<f64> {
     best
 }
 
-/// Fills `vp.visible` with the parameter ranges of the piece not buried in another element.
-///
-/// Blockers are the elements whose bounding balls meet the piece's. A blocker that contains the
-/// piece's sphere(s) is handled exactly: a sphere inside a convex hull of spheres touches its
-/// boundary only where it is the hull's support, so the arc stays visible on the blocker's
-/// active arcs of that sphere, and a generator segment of two of its spheres is visible iff that
-/// pair supports the segment's normal. Other blockers are handled by the Lipschitz subdivision
-/// of `φ_B(x(s)) + tol` on the still-visible ranges.
-fn clip(g: &SphereMeshGeometry, own: usize, basis: &ViewBasis, tol: f64, vp: &mut VisiblePiece) {
-    let frame = &g.frames[own];
-    let (centers, radii) = (frame.centers(), frame.radii());
+/// How one element can bury a piece of another (see [`blockers`]).
+enum Blocker<'a> {
+    /// The piece is an arc of the blocker's sphere: visible only on the arcs (unwrapped
+    /// angles) where that sphere supports the blocker's hull.
+    SharedArc([(f64, f64); 2], usize),
+    /// The piece is the generator segment of two of the blocker's spheres: wholly visible or
+    /// wholly buried, as the pair supports the segment's normal or not.
+    SharedSegment(bool),
+    /// Any other element: buries where `φ_B + tol < 0`.
+    Other(&'a ElementFrame),
+}
+
+/// The elements that may bury piece `vp` of element `own`: those whose bounding balls meet the
+/// piece's. A blocker that contains the piece's sphere(s) is classified exactly: a sphere inside
+/// a convex hull of spheres touches its boundary only where it is the hull's support, so the arc
+/// stays visible on the blocker's active arcs of that sphere, and a generator segment of two of
+/// its spheres is visible iff that pair supports the segment's normal.
+fn blockers<'a>(
+    g: &'a SphereMeshGeometry,
+    own: usize,
+    basis: &'a ViewBasis,
+    vp: &'a VisiblePiece,
+) -> impl Iterator<Item = Blocker<'a>> + 'a {
     let own_ids = g.elements[own].spheres();
-    let piece = vp.piece;
-    let (lo, hi) = piece.range();
-    let mut vis = Intervals::new(lo, hi);
-    let speed = piece.speed(centers, radii).max(1e-12);
     let [bx, by, bz, br] = vp.bound;
     let bound_center = Vector3::new(bx, by, bz);
-    for (b, ball) in g.packed.iter().enumerate() {
+    g.packed.iter().enumerate().filter_map(move |(b, ball)| {
         let reach = ball[3] + br;
         if b == own
             || (bound_center - Vector3::new(ball[0], ball[1], ball[2])).norm_squared()
                 >= reach * reach
         {
-            continue;
+            return None;
         }
         let blocker = &g.frames[b];
         let b_ids = g.elements[b].spheres();
         let local_in_b = |local: u8| b_ids.iter().position(|&x| x == own_ids[local as usize]);
-        match piece {
-            Piece::Arc { sphere, .. } => {
-                if let Some(k) = local_in_b(sphere) {
+        Some(match vp.piece {
+            Piece::Arc { sphere, .. } => match local_in_b(sphere) {
+                Some(k) => {
                     let (arcs, n) = sphere_arcs(blocker.centers(), blocker.radii(), basis, k);
-                    vis.intersect_circular(&arcs[..n]);
-                    if vis.is_empty() {
-                        break;
-                    }
-                    continue;
+                    Blocker::SharedArc(arcs, n)
                 }
-            }
+                None => Blocker::Other(blocker),
+            },
             Piece::Segment {
                 spheres: [i, j],
                 normal,
-            } => {
-                if let (Some(ki), Some(_)) = (local_in_b(i), local_in_b(j)) {
+            } => match (local_in_b(i), local_in_b(j)) {
+                (Some(ki), Some(_)) => {
                     let (bc, br) = (blocker.centers(), blocker.radii());
                     let own_support = normal.dot(&bc[ki]) + br[ki];
-                    let supported = bc.iter().zip(br).all(|(c, r)| {
+                    Blocker::SharedSegment(bc.iter().zip(br).all(|(c, r)| {
                         normal.dot(c) + r <= own_support + 1e-9 * (1.0 + own_support.abs())
-                    });
-                    if !supported {
-                        vis.clear();
-                        break;
-                    }
-                    continue;
+                    }))
                 }
-            }
+                _ => Blocker::Other(blocker),
+            },
+        })
+    })
+}
+
+/// Whether the point `x` of piece `vp` (of element `own`) is visible: what [`clip`] decides
+/// for it, from one evaluation per blocker instead of a subdivision of the whole piece. The two
+/// agree but within the resolution of the clip's boundaries (which it pins on the visible side)
+/// and on dips narrower than it.
+fn visible_at(
+    g: &SphereMeshGeometry,
+    own: usize,
+    basis: &ViewBasis,
+    tol: f64,
+    vp: &VisiblePiece,
+    x: &PiecePoint,
+) -> bool {
+    use core::f64::consts::TAU;
+    blockers(g, own, basis, vp).all(|blocker| match blocker {
+        Blocker::SharedArc(arcs, n) => {
+            // The arc's angle, from its in-plane normal direction.
+            let d = basis.flatten(&x.normal);
+            let angle = d.y.atan2(d.x);
+            arcs[..n]
+                .iter()
+                .any(|&(lo, hi)| angle - ((angle - lo) / TAU).floor() * TAU <= hi)
         }
+        Blocker::SharedSegment(supported) => supported,
+        Blocker::Other(frame) => frame.distance(&x.point) + tol >= 0.0,
+    })
+}
+
+/// Fills `vp.visible` with the parameter ranges of the piece not buried in another element
+/// ([`blockers`]: exactly for the blockers that share its spheres, otherwise by the Lipschitz
+/// subdivision of `φ_B(x(s)) + tol` on the still-visible ranges).
+fn clip(g: &SphereMeshGeometry, own: usize, basis: &ViewBasis, tol: f64, vp: &mut VisiblePiece) {
+    let frame = &g.frames[own];
+    let (centers, radii) = (frame.centers(), frame.radii());
+    let piece = vp.piece;
+    let (lo, hi) = piece.range();
+    let mut vis = Intervals::new(lo, hi);
+    let speed = piece.speed(centers, radii).max(1e-12);
+    for blocker in blockers(g, own, basis, vp) {
+        let blocker = match blocker {
+            Blocker::SharedArc(arcs, n) => {
+                vis.intersect_circular(&arcs[..n]);
+                if vis.is_empty() {
+                    break;
+                }
+                continue;
+            }
+            Blocker::SharedSegment(supported) => {
+                if !supported {
+                    vis.clear();
+                    break;
+                }
+                continue;
+            }
+            Blocker::Other(blocker) => blocker,
+        };
         let f = |s: f64| blocker.distance(&piece.at(centers, radii, basis, s).point) + tol;
         let mut buried = Intervals::empty();
         for &(a, c) in vis.as_slice() {
@@ -401,23 +524,7 @@ fn clip(g: &SphereMeshGeometry, own: usize, basis: &ViewBasis, tol: f64, vp: &mu
     let kept = vis.as_slice();
     let n = kept.len().min(MAX_VISIBLE);
     for (span, &(a, b)) in vp.visible.iter_mut().zip(&kept[..n]) {
-        let dir = |t: f64| {
-            let (sin, cos) = t.sin_cos();
-            Vector2::new(cos, sin)
-        };
-        *span = match piece {
-            Piece::Arc { .. } => Span {
-                a,
-                b,
-                da: dir(a),
-                db: dir(b),
-            },
-            Piece::Segment { .. } => Span {
-                a,
-                b,
-                ..Span::default()
-            },
-        };
+        *span = Span::new(&piece, a, b);
     }
     vp.n_visible = n as u8;
 }
@@ -738,6 +845,58 @@ mod tests {
                     c.map(|x| (x.0.to_bits(), x.1))
                 );
                 assert_eq!(a.map(|x| x.2.point), c.map(|x| x.2.point));
+            }
+        }
+    }
+
+    /// The nearest point of a whole piece (what [`Nearest::scan`] orders the pieces by, and
+    /// keeps when it is visible) against the nearest of 401 samples along it.
+    #[test]
+    fn whole_piece_nearest_point_matches_sampling() {
+        use crate::query::silhouette::{element_pieces, MAX_ELEMENT_PIECES};
+        let centers = [
+            Vector3::new(0.0, 0.0, 0.0),
+            Vector3::new(30.0, 4.0, -6.0),
+            Vector3::new(8.0, 25.0, 3.0),
+        ];
+        let radii = [9.0, 5.0, 7.0];
+        let basis = ViewBasis::new(Vector3::new(0.3, -0.2, 1.0).normalize());
+        let mut out = [Piece::Arc {
+            sphere: 0,
+            lo: 0.0,
+            hi: 0.0,
+        }; MAX_ELEMENT_PIECES];
+        let n = element_pieces(&centers, &radii, &basis, &mut out);
+        assert!(n >= 4, "{n} pieces");
+        for piece in &out[..n] {
+            let (lo, hi) = piece.range();
+            let whole = [Span::new(piece, lo, hi)];
+            let samples: Vec<Vector3<f64>> = (0..=400)
+                .map(|k| {
+                    let s = lo + (hi - lo) * f64::from(k) / 400.0;
+                    piece.at(&centers, &radii, &basis, s).point
+                })
+                .collect();
+            let step = (0..400)
+                .map(|k| (samples[k + 1] - samples[k]).norm())
+                .fold(0.0, f64::max);
+            // A lattice over a cube around the element, off the sampled points.
+            let axis = |k: usize| -35.3 + 12.7 * k as f64;
+            for k in 0..343 {
+                let p = Vector3::new(axis(k % 7), axis(k / 7 % 7), axis(k / 49) - 5.0);
+                let x = nearest_on(piece, &whole, &centers, &radii, &basis, &p).point;
+                let on_piece = samples
+                    .iter()
+                    .map(|s| (x - s).norm())
+                    .fold(f64::INFINITY, f64::min);
+                assert!(on_piece <= step, "{on_piece} mm off the piece");
+                let d = (p - x).norm();
+                let brute = samples
+                    .iter()
+                    .map(|s| (p - s).norm())
+                    .fold(f64::INFINITY, f64::min);
+                assert!(d <= brute + 1e-9, "{d} > {brute}");
+                assert!(brute - d <= step, "{d} far below sampling's {brute}");
             }
         }
     }
