@@ -168,7 +168,13 @@ pub struct DepthRenderer {
     /// between calls.
     candidates: Vec<u64>,
     touched: Vec<u32>,
+    /// Per pixel the element that [`DepthRenderer::render_hits`] last found there
+    /// ([`NO_WINNER`] if none): cast first, its hit culls the elements behind it.
+    winners: Vec<u8>,
 }
+
+/// [`DepthRenderer::render_hits`]'s winner of a pixel no element was found at.
+const NO_WINNER: u8 = u8::MAX;
 
 /// Exact pixel range `[lo, hi]` of `x/z` for a sphere entirely in front of the camera, along one
 /// image axis (`coord` = the sphere center's x or y, `focal`, `principal`).
@@ -290,18 +296,28 @@ impl DepthRenderer {
             }
         }
         self.touched.sort_unstable();
+        // A tracker renders the same pixels of a slightly moved model every solver iteration:
+        // the pixel's last winner first usually leaves the others only a bounding-ball test.
+        self.winners.resize(w as usize * h as usize, NO_WINNER);
         for &k in &self.touched {
             let k = k as usize;
             let mut bits = std::mem::take(&mut self.candidates[k]);
             let ray = intrinsics.pixel_ray((k % w as usize) as f64, (k / w as usize) as f64);
-            let items = std::iter::from_fn(|| {
+            let last = self.winners[k];
+            let first = (last < 64 && bits & 1 << last != 0).then(|| {
+                bits &= !(1 << last);
+                usize::from(last)
+            });
+            let rest = std::iter::from_fn(|| {
                 (bits != 0).then(|| {
                     let e = bits.trailing_zeros() as usize;
                     bits &= bits - 1;
                     e
                 })
             });
-            if let Some(hit) = cast_prepared(&ray, &self.prepared, items) {
+            let hit = cast_prepared(&ray, &self.prepared, first.into_iter().chain(rest));
+            self.winners[k] = hit.map_or(NO_WINNER, |h| h.element as u8);
+            if let Some(hit) = hit {
                 push(k, &hit);
             }
         }

@@ -186,42 +186,54 @@ impl PreparedElement {
                 }
             }
         }
-        let mut best: Option<(f64, V3)> = None;
+        // The best crossing so far and its primitive (cone `i` or sphere `3 + i`): normals are
+        // worked out for the entry alone.
+        let mut best: Option<(f64, usize)> = None;
         // Whether a crossing at `t` can still be the entry.
-        let wins = |best: &Option<(f64, V3)>, t: f64| match best {
+        let wins = |best: &Option<(f64, usize)>, t: f64| match best {
             Some((bt, _)) => t < *bt,
             None => t <= t_hi,
         };
-        for cone in self.cones.iter().flatten() {
+        let dd = d.norm_squared();
+        for (i, cone) in self.cones.iter().enumerate() {
+            let Some(cone) = cone else { continue };
             let w = o - cone.apex_side;
             let s0 = w.dot(&cone.axis);
             let ds = d.dot(&cone.axis);
             let radial0 = w - cone.axis * s0;
+            let radial0_d = radial0.dot(d);
             let k = cone.cos * cone.cos;
             let q0 = cone.r_a - s0 * cone.sin;
-            let a = k * (d.norm_squared() - ds * ds) - ds * ds * cone.sin * cone.sin;
-            let b = k * radial0.dot(d) + q0 * ds * cone.sin;
+            let a = k * (dd - ds * ds) - ds * ds * cone.sin * cone.sin;
+            let b = k * radial0_d + q0 * ds * cone.sin;
             let c = k * radial0.norm_squared() - q0 * q0;
             for t in quadratic(a, b, c).into_iter().flatten() {
                 let s = s0 + t * ds;
                 if !(s >= cone.s_lo && s <= cone.s_hi && wins(&best, t)) {
                     continue;
                 }
-                let n = cone.normal_at(&(o + d * t));
-                if n.dot(d) < 0.0 {
-                    best = Some((t, n));
+                // Entering: the normal `sin α·axis + cos α·radial/ρ` against `d`, times
+                // `ρ cos α > 0`, where on the band `ρ cos α = r_a − s sin α` (no square root).
+                let radial_d = radial0_d + t * (dd - ds * ds);
+                if cone.sin * ds * (cone.r_a - s * cone.sin) + k * radial_d < 0.0 {
+                    best = Some((t, i));
                 }
             }
         }
-        if self.count == 2 && best.is_some() {
-            return best;
-        }
-        for s in self.spheres() {
-            if let Some(t) = ball_entry(s, o, d).filter(|&t| wins(&best, t)) {
-                best = Some((t, ball_normal(s, &(o + d * t), d)));
+        if !(self.count == 2 && best.is_some()) {
+            for (i, s) in self.spheres().iter().enumerate() {
+                if let Some(t) = ball_entry(s, o, d).filter(|&t| wins(&best, t)) {
+                    best = Some((t, 3 + i));
+                }
             }
         }
-        best
+        let (t, i) = best?;
+        let x = o + d * t;
+        let normal = match self.cones.get(i) {
+            Some(cone) => cone.as_ref()?.normal_at(&x),
+            None => ball_normal(&self.spheres[i - 3], &x, d),
+        };
+        Some((t, normal))
     }
 
     /// The first hit of `ray` with the element (§3.3.2), or `None` (also for an invalid ray, and when the
