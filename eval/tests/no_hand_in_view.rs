@@ -5,10 +5,13 @@
 //! to a patch of the wall; with the hand wholly in view no frame may be `no_hand`; once it is
 //! back the trackers must find it again.
 //!
-//! Measured (session 27, 30 Hz, ToF noise, seed 8): before the segmentation rejected surfaces,
-//! every frame out of view gave a crumpled hand ≈ 700 mm deep in the wall, flagged `lost`
-//! (mean keypoint error of the library's 240-frame sequence 495 mm under ToF, 639 mm
-//! noise-free, against 102 mm with the held pose).
+//! Measured (session 27; 360 frames at 30 Hz, seed 8, 172 of them with the hand wholly out of
+//! view): before the segmentation rejected surfaces, every frame out of view gave a crumpled
+//! hand ≈ 700 mm deep in the wall, flagged `lost`, and the Ch. 3 tracker ended 63 mm off under
+//! ToF (last 30 frames, the hand back in view). Now 1 of the 172 frames is given a hand (the
+//! forearm is still in view just after the hand left), in both trackers and noise models, and
+//! the last 30 frames are tracked at 1.01 / 2.23 mm (Ch. 3 / Ch. 2) under ToF and 0.34 / 7.13 mm
+//! noise-free.
 
 use eval::synthetic::{SyntheticRun, SyntheticSequence, SyntheticSpec};
 use hand_model::cylinder::CylinderModel;

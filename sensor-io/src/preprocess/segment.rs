@@ -134,61 +134,69 @@ impl Default for DepthOnlyParams {
 /// wristband's center.
 const SECTION_HALF_WIDTH_MM: f64 = 5.0;
 
-/// Widest inscribed circle (radius, mm) of a hand: a palm or a fist is at most ≈ 100 mm across
-/// (a radius ≈ 50 mm), a forearm seen end-on less. A component with a wider one is a surface
-/// that the growth reached from its nearest point — a wall or a table with no hand in front of
-/// it, a torso the hand touches — and the frame has no hand: tracked, the wall behind a hand
-/// that had left the view was taken for a crumpled hand (synthetic `leave_reenter`: 130 frames
-/// flagged `lost` with keypoints 700 mm deep in the wall, instead of `no_hand`).
-const MAX_INSCRIBED_MM: f64 = 90.0;
-
-/// Least share of a hand's outline that stands clear of what lies behind it
-/// ([`separation`]). A hand stands in front of the background; a patch that the growth cut out
-/// of a noisy surface (a wall at 1.1 m under ToF noise, where neighbouring depths differ by more
-/// than the growth's step) is bounded by more of the same surface. Measured on the synthetic
-/// library (ToF, structured light, noise-free, two cameras): hands 0.80–1.00 in every frame;
-/// patches of the wall behind a hand that had left the view 0.16–0.33.
+/// Least share of a hand's outline that stands clear of what lies behind it ([`Outline`]). A
+/// hand stands in front of the background; a patch that the growth cut out of a noisy surface
+/// (a wall at 1.1 m under ToF noise, where neighbouring depths differ by more than the growth's
+/// step) is bounded by more of the same surface. Measured on the synthetic library (ToF,
+/// structured light, noise-free, two cameras): hands 0.80–1.00 in every frame; patches of the
+/// wall behind a hand that had left the view 0.16–0.33.
 const MIN_SEPARATION: f64 = 0.5;
 
-/// The share of the component's outline edges (a member pixel and a 4-neighbour that the growth
-/// rejected for its depth, not for the growth volume) across which the depth jumps beyond twice
-/// the growth's step or out of range.
-fn separation(
-    depth: &DepthImage,
-    params: &DepthOnlyParams,
-    max_step: f64,
-    mask: &[u8],
-    pixels: &[usize],
-) -> f64 {
-    let (w, h) = (depth.width as usize, depth.height as usize);
-    let (mut edges, mut clear) = (0usize, 0usize);
-    for &i in pixels {
-        let (u, v) = (i % w, i / w);
-        let d0 = f64::from(depth.data[i]);
-        let neighbours = [
-            (u > 0).then(|| i - 1),
-            (u + 1 < w).then(|| i + 1),
-            (v > 0).then(|| i - w),
-            (v + 1 < h).then(|| i + w),
-        ];
-        for j in neighbours.into_iter().flatten() {
-            if mask[j] != 0 {
-                continue;
+/// How a component of the growth is bounded, counted over its member pixels' 4-neighbours that
+/// are not members (the image border aside).
+#[derive(Copy, Clone, Debug, Default, PartialEq, Eq)]
+struct Outline {
+    /// Neighbours the growth rejected for their depth (a step beyond its own, or out of range):
+    /// the component's outline.
+    edges: usize,
+    /// Outline neighbours across a step beyond twice the growth's, or out of range.
+    clear: usize,
+    /// Neighbours the growth left out for its volume alone: where the arm leaves it.
+    exits: usize,
+}
+
+impl Outline {
+    fn of(
+        depth: &DepthImage,
+        params: &DepthOnlyParams,
+        max_step: f64,
+        mask: &[u8],
+        pixels: &[usize],
+    ) -> Self {
+        let (w, h) = (depth.width as usize, depth.height as usize);
+        let mut out = Self::default();
+        for &i in pixels {
+            let (u, v) = (i % w, i / w);
+            let d0 = f64::from(depth.data[i]);
+            let neighbours = [
+                (u > 0).then(|| i - 1),
+                (u + 1 < w).then(|| i + 1),
+                (v > 0).then(|| i - w),
+                (v + 1 < h).then(|| i + w),
+            ];
+            for j in neighbours.into_iter().flatten().filter(|&j| mask[j] == 0) {
+                let d = depth.data[j];
+                let out_of_range = d == 0 || d < params.near || d > params.far;
+                let step = f64::from(d) - d0;
+                if !out_of_range && step.abs() <= max_step {
+                    out.exits += 1;
+                } else {
+                    out.edges += 1;
+                    out.clear += usize::from(out_of_range || step > 2.0 * max_step);
+                }
             }
-            let d = depth.data[j];
-            let out_of_range = d == 0 || d < params.near || d > params.far;
-            let step = f64::from(d) - d0;
-            if !out_of_range && step.abs() <= max_step {
-                continue; // left out by the growth volume: an exit, not outline
-            }
-            edges += 1;
-            clear += usize::from(out_of_range || step > 2.0 * max_step);
         }
+        out
     }
-    if edges == 0 {
-        1.0
-    } else {
-        clear as f64 / edges as f64
+
+    /// Whether the component is a surface rather than a hand: bounded more by the growth volume
+    /// than by an outline of its own (an exact wall or table: a hand leaves the volume only
+    /// where its forearm does), or by an outline mostly on more of the same surface
+    /// ([`MIN_SEPARATION`]). Tracked, the wall behind a hand that had left the view was taken
+    /// for a crumpled hand (synthetic `leave_reenter`: every frame out of view flagged `lost`
+    /// with keypoints 700 mm deep in the wall, instead of `no_hand`).
+    fn is_surface(&self) -> bool {
+        self.exits > self.edges || (self.clear as f64) < MIN_SEPARATION * self.edges as f64
     }
 }
 
@@ -326,8 +334,8 @@ fn find_seed(depth: &DepthImage, near: u16, far: u16) -> Option<usize> {
 /// thumb tip alone). Tracking on it: `eval/tests/depth_only_tracking.rs`.
 ///
 /// An empty segment (count 0) when nothing hand-sized is in range, and when the component is a
-/// surface rather than a hand: an inscribed circle wider than a palm's (`MAX_INSCRIBED_MM`) or
-/// an outline mostly bounded by more of the same surface (`MIN_SEPARATION`). Synthetic
+/// surface rather than a hand: bounded more by the growth volume than by an outline of its own,
+/// or by an outline mostly on more of the same surface (`MIN_SEPARATION`). Synthetic
 /// `leave_reenter` (the hand leaves the view for ≈ 2 s, a wall at 1.1 m behind it), frames out
 /// of view that a tracker was given a "hand" on, before → after: 323–345 → 0–2 of ≈ 730 under
 /// ToF noise and structured light (seeds 8 and 10); no frame with the hand wholly in view lost. Allocation-free once the
@@ -387,7 +395,7 @@ struct Growth {
 
 /// One pass of [`segment_depth_only`]; returns the component's extent (mm, the largest
 /// distance of its points from the seed; 0 when it is too small to count), or `None` when the
-/// component is a surface rather than a hand ([`MAX_INSCRIBED_MM`]).
+/// component is a surface rather than a hand ([`Outline::is_surface`]).
 fn segment_pass(
     depth: &DepthImage,
     camera: &Camera,
@@ -464,6 +472,10 @@ fn segment_pass(
         out.mask.data.iter_mut().for_each(|m| *m = 0);
         return Some(0.0);
     }
+    let outline = Outline::of(depth, params, growth.max_step, &out.mask.data, pixels);
+    if outline.is_surface() {
+        return None;
+    }
     // Inscribed radius of every silhouette pixel: distance to the background, computed on the
     // component's bounding box (plus a background border) rather than the whole image.
     let (mut u0, mut v0, mut u1, mut v1) = (w, h, 0, 0);
@@ -490,12 +502,6 @@ fn segment_pass(
         let (u, v) = (i % w - u0 + 1, i / w - v0 + 1);
         (dt.dist2[v * cw + u].sqrt() as f64) * mm_per_px(i)
     };
-    if pixels.iter().any(|&i| radius_mm(i) > MAX_INSCRIBED_MM) {
-        return None;
-    }
-    if separation(depth, params, growth.max_step, &out.mask.data, pixels) < MIN_SEPARATION {
-        return None;
-    }
     pts.clear();
     pts.extend(pixels.iter().map(|&i| point(depth, camera, i)));
     let extent = pts.iter().map(|p| (p - seed_p).norm()).fold(0.0, f64::max);
@@ -1245,10 +1251,11 @@ mod tests {
         out
     }
 
-    /// With no hand in view the nearest surface is a wall: exact, its patch has a far wider
-    /// inscribed circle than a palm; under noise whose neighbouring depths differ by more than
-    /// the growth's step, its patches are bounded by more wall (low separation). Neither is a
-    /// hand. A hand in front of the same walls is found.
+    /// With no hand in view the nearest surface is a wall: exact, its patch is bounded by the
+    /// growth volume alone; under noise whose neighbouring depths differ by more than the
+    /// growth's step, its patches are bounded by more wall (low separation). Neither is a hand.
+    /// A hand in front of the same walls is found, and so is one holding a ball wider than any
+    /// palm (its outline stands clear of the wall).
     #[test]
     fn a_wall_is_not_a_hand_and_a_hand_before_it_is() {
         let camera = Camera::sr300_qvga();
@@ -1260,15 +1267,21 @@ mod tests {
                 0,
                 "wall with noise σ = {sigma} mm"
             );
-            let mut hand = flat_depth(&camera, 400.0, flat_hand);
-            let hand_pixels = hand.data.iter().filter(|&&d| d > 0).count();
-            wall_behind(&mut hand, sigma, seed);
-            let found = segment(&hand, &camera);
-            assert!(
-                found.count > hand_pixels / 2 && found.palm_center.is_some(),
-                "hand before a wall with noise σ = {sigma} mm: {} of {hand_pixels} pixels",
-                found.count
-            );
+            let ball = |x: f64, y: f64| (x - 60.0).powi(2) + (y + 40.0).powi(2) < 110.0 * 110.0;
+            for (name, shape) in [
+                ("hand", &flat_hand as &dyn Fn(f64, f64) -> bool),
+                ("hand with a ball", &|x, y| flat_hand(x, y) || ball(x, y)),
+            ] {
+                let mut hand = flat_depth(&camera, 400.0, shape);
+                let hand_pixels = hand.data.iter().filter(|&&d| d > 0).count();
+                wall_behind(&mut hand, sigma, seed);
+                let found = segment(&hand, &camera);
+                assert!(
+                    found.count > hand_pixels / 2 && found.palm_center.is_some(),
+                    "{name} before a wall with noise σ = {sigma} mm: {} of {hand_pixels} pixels",
+                    found.count
+                );
+            }
         }
     }
 
