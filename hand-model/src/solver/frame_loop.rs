@@ -60,6 +60,10 @@ pub struct FrameLoop {
     loss: LossParams,
     initialized: bool,
     failed_run: usize,
+    /// The pose of the last frame not flagged `lost` (valid when `has_fitted`), what a frame
+    /// without a hand reports.
+    fitted: Pose,
+    has_fitted: bool,
 }
 
 impl FrameLoop {
@@ -67,11 +71,13 @@ impl FrameLoop {
     pub fn new(fallback: Pose, loss: LossParams) -> Self {
         Self {
             pose: fallback.clone(),
+            fitted: fallback.clone(),
             fallback,
             base: loss.clone(),
             loss,
             initialized: false,
             failed_run: 0,
+            has_fitted: false,
         }
     }
 
@@ -99,13 +105,19 @@ impl FrameLoop {
     }
 
     /// Track one frame whose data the problem already holds; `num_points` is the number of
-    /// sensor points (fewer than [`LossParams::min_points`]: `no_hand`, the pose is kept and
-    /// the next frame re-initializes). A failed solve keeps the previous pose
-    /// (`solver_failed`); [`LossParams::window`] failed frames in a row re-initialize.
+    /// sensor points (fewer than [`LossParams::min_points`]: `no_hand`, the pose becomes the
+    /// last one that fitted its frame — not `lost` — and the next frame re-initializes; a
+    /// re-initialization that failed on a patch of background taken for the hand would
+    /// otherwise be held through every frame until the hand is back). A failed solve keeps the
+    /// previous pose (`solver_failed`); [`LossParams::window`] failed frames in a row
+    /// re-initialize.
     pub fn step(&mut self, problem: &mut impl TrackingProblem, num_points: usize) -> FrameOutcome {
         let mut out = FrameOutcome::default();
         if num_points < self.loss.min_points.max(1) {
             out.flags.push("no_hand");
+            if self.has_fitted {
+                self.pose.values.clone_from(&self.fitted.values);
+            }
             self.initialized = false;
             self.failed_run = 0;
             problem.clear_history();
@@ -138,6 +150,9 @@ impl FrameLoop {
         }
         if stats.failed {
             out.flags.push("lost");
+        } else {
+            self.fitted.values.clone_from(&self.pose.values);
+            self.has_fitted = true;
         }
         out.stats = Some(stats);
         self.initialized = true;
@@ -289,5 +304,34 @@ mod tests {
         let mut fl = FrameLoop::new(Pose { values: vec![0.0] }, LossParams::default());
         fl.step(&mut toy, 500);
         assert_eq!(fl.pose.values[0], 8.0);
+    }
+
+    /// A frame without a hand reports the last pose that fitted, not the pose of a failed
+    /// re-initialization before it (a patch of background taken for the hand).
+    #[test]
+    fn no_hand_reports_the_last_fitted_pose() {
+        let mut fl = FrameLoop::new(Pose { values: vec![0.0] }, LossParams::default());
+        let mut toy = Toy {
+            target: 3.0,
+            reach: 10.0,
+            at: 0.0,
+            solves: 0,
+            cleared: 0,
+            starts: vec![(1.0, false)],
+        };
+        assert_eq!(fl.step(&mut toy, 500).flags, ["reinitialized"]);
+        assert_eq!(fl.step(&mut toy, 10).flags, ["no_hand"]);
+        assert_eq!(fl.pose.values[0], 3.0);
+        // Background far from any start: the re-initialization fails.
+        toy.target = 300.0;
+        toy.reach = 1.0;
+        toy.starts = vec![(50.0, false)];
+        assert_eq!(fl.step(&mut toy, 500).flags, ["reinitialized", "lost"]);
+        assert_eq!(fl.pose.values[0], 350.0);
+        assert_eq!(fl.step(&mut toy, 10).flags, ["no_hand"]);
+        assert_eq!(
+            fl.pose.values[0], 3.0,
+            "the last fitted pose, not the failed one"
+        );
     }
 }
