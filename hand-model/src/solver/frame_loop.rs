@@ -214,6 +214,19 @@ mod tests {
         starts: Vec<(f64, bool)>,
     }
 
+    impl Toy {
+        fn new(target: f64, reach: f64, starts: Vec<(f64, bool)>) -> Self {
+            Self {
+                target,
+                reach,
+                at: 0.0,
+                solves: 0,
+                cleared: 0,
+                starts,
+            }
+        }
+    }
+
     impl TrackingProblem for Toy {
         fn solve(&mut self, pose: &mut Pose) -> bool {
             self.solves += 1;
@@ -250,14 +263,7 @@ mod tests {
     #[test]
     fn loses_after_the_window_and_recovers_by_reinitializing() {
         let mut fl = FrameLoop::new(Pose { values: vec![0.0] }, LossParams::default());
-        let mut toy = Toy {
-            target: 0.0,
-            reach: 10.0,
-            at: 0.0,
-            solves: 0,
-            cleared: 0,
-            starts: vec![(5.0, false)],
-        };
+        let mut toy = Toy::new(0.0, 10.0, vec![(5.0, false)]);
         assert_eq!(fl.step(&mut toy, 10).flags, ["no_hand"]);
         assert_eq!(fl.step(&mut toy, 500).flags, ["reinitialized"]);
         assert!(fl.step(&mut toy, 500).flags.is_empty());
@@ -279,14 +285,7 @@ mod tests {
     /// wins when it fits better.
     #[test]
     fn backups_are_tried_only_after_a_poor_placement() {
-        let mut toy = Toy {
-            target: 0.0,
-            reach: 6.0,
-            at: 0.0,
-            solves: 0,
-            cleared: 0,
-            starts: vec![(5.0, false), (3.0, true)],
-        };
+        let mut toy = Toy::new(0.0, 6.0, vec![(5.0, false), (3.0, true)]);
         let mut fl = FrameLoop::new(Pose { values: vec![0.0] }, LossParams::default());
         assert_eq!(fl.step(&mut toy, 500).flags, ["reinitialized"]);
         assert_eq!(
@@ -311,14 +310,7 @@ mod tests {
     #[test]
     fn no_hand_reports_the_last_fitted_pose() {
         let mut fl = FrameLoop::new(Pose { values: vec![0.0] }, LossParams::default());
-        let mut toy = Toy {
-            target: 3.0,
-            reach: 10.0,
-            at: 0.0,
-            solves: 0,
-            cleared: 0,
-            starts: vec![(1.0, false)],
-        };
+        let mut toy = Toy::new(3.0, 10.0, vec![(1.0, false)]);
         assert_eq!(fl.step(&mut toy, 500).flags, ["reinitialized"]);
         assert_eq!(fl.step(&mut toy, 10).flags, ["no_hand"]);
         assert_eq!(fl.pose.values[0], 3.0);
