@@ -52,11 +52,6 @@
 //!   area outside the model (`htrack_icp::DEFAULT_PLACEMENT_OUTSIDE`), the score unchanged:
 //!   every cell as before (at 20 % the structured-light fist, lost either way, moved 70.93 →
 //!   70.99 mm).
-//! - Session 27's second look at each placement, 10 frames after it
-//!   (`hand_model::solver::RECHECK_FRAMES`), moved the table by ≤ 0.1 mm but for: structured
-//!   light pose 3, default template 35.93 → 17.12 mm, own model 31.84 → 28.79, pose 1 own model
-//!   9.22 → 8.97; noise-free pose 5 (the fist) own model 10.24 → 11.86, default template
-//!   63.09 → 62.34.
 //! - Pose 3's folded ring and pinky fingertips are hidden: ≈ 11 mm even with the hand's own
 //!   model.
 //! - Structured light (session 23; the E_d2m comparison is printed, not asserted, for it): the

@@ -64,14 +64,7 @@ pub struct FrameLoop {
     /// without a hand reports.
     fitted: Pose,
     has_fitted: bool,
-    /// Frames until the placement of the last re-initialization is checked again.
-    recheck_in: Option<usize>,
 }
-
-/// A re-initialization places the hand on what it sees of it, often the first fingers of a hand
-/// entering the view: this many frames later, the hypotheses are solved again against the
-/// tracked pose (which stays unless one fits better).
-pub const RECHECK_FRAMES: usize = 10;
 
 impl FrameLoop {
     /// A loop that starts uninitialized at `fallback` (the first frame re-initializes).
@@ -85,7 +78,6 @@ impl FrameLoop {
             initialized: false,
             failed_run: 0,
             has_fitted: false,
-            recheck_in: None,
         }
     }
 
@@ -118,8 +110,7 @@ impl FrameLoop {
     /// re-initialization that failed on a patch of background taken for the hand would
     /// otherwise be held through every frame until the hand is back). A failed solve keeps the
     /// previous pose (`solver_failed`); [`LossParams::window`] failed frames in a row
-    /// re-initialize. [`RECHECK_FRAMES`] frames after a re-initialization from scratch the
-    /// hypotheses are tried again beside the tracked pose (flag `reinitialized` when one wins).
+    /// re-initialize.
     pub fn step(&mut self, problem: &mut impl TrackingProblem, num_points: usize) -> FrameOutcome {
         let mut out = FrameOutcome::default();
         if num_points < self.loss.min_points.max(1) {
@@ -141,16 +132,6 @@ impl FrameLoop {
                 self.pose = trial;
             } else {
                 out.flags.push("solver_failed");
-            }
-            if let Some(n) = self.recheck_in.as_mut() {
-                *n -= 1;
-                if *n == 0 {
-                    let tracked = self.pose.clone();
-                    self.reinitialize(problem);
-                    if self.pose != tracked {
-                        out.flags.push("reinitialized");
-                    }
-                }
             }
         }
         let mut stats = problem.frame_stats(&self.loss);
@@ -184,7 +165,6 @@ impl FrameLoop {
     /// backup hypotheses are solved only when the best of the others is a poor placement
     /// ([`FrameStats::is_poor_placement`]), and replace it only with one that is not.
     fn reinitialize(&mut self, problem: &mut impl TrackingProblem) {
-        self.recheck_in = (!self.initialized).then_some(RECHECK_FRAMES);
         problem.clear_history();
         let mut best: Option<(f64, Pose, bool)> = None;
         let current = self.initialized.then(|| Hypothesis {
@@ -345,27 +325,5 @@ mod tests {
             fl.pose.values[0], 3.0,
             "the last fitted pose, not the failed one"
         );
-    }
-
-    /// A placement made on part of the hand (a poor start that still explains the data) is
-    /// checked again [`RECHECK_FRAMES`] frames later, and a start that now fits better wins.
-    #[test]
-    fn a_placement_is_checked_again() {
-        let mut fl = FrameLoop::new(Pose { values: vec![0.0] }, LossParams::default());
-        let mut toy = Toy::new(0.0, 3.0, vec![(4.0, false)]);
-        assert_eq!(fl.step(&mut toy, 500).flags, ["reinitialized"]);
-        assert_eq!(fl.pose.values[0], 4.0, "out of the solve's reach, not lost");
-        toy.starts = vec![(1.0, false)];
-        for _ in 1..RECHECK_FRAMES {
-            assert!(fl.step(&mut toy, 500).flags.is_empty());
-            assert_eq!(fl.pose.values[0], 4.0);
-        }
-        assert_eq!(fl.step(&mut toy, 500).flags, ["reinitialized"]);
-        assert_eq!(fl.pose.values[0], 0.0);
-        // Once only: the next frames track.
-        toy.starts = vec![(-1.0, false)];
-        for _ in 0..2 * RECHECK_FRAMES {
-            assert!(fl.step(&mut toy, 500).flags.is_empty());
-        }
     }
 }
