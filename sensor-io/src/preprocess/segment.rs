@@ -349,12 +349,13 @@ fn find_seed(depth: &DepthImage, near: u16, far: u16) -> Option<usize> {
 /// thumb tip alone). Tracking on it: `eval/tests/depth_only_tracking.rs`.
 ///
 /// An empty segment (count 0) when nothing hand-sized is in range, and when the component is a
-/// surface rather than a hand: bounded more by the growth volume than by an outline of its own,
-/// or by an outline mostly on more of the same surface (`MIN_SEPARATION`). Synthetic
-/// `leave_reenter` (the hand leaves the view for ≈ 2 s, a wall at 1.1 m behind it), frames out
-/// of view that a tracker was given a "hand" on, before → after: 323–345 → 0–2 of ≈ 730 under
-/// ToF noise and structured light (seeds 8 and 10); no frame with the hand wholly in view lost. Allocation-free once the
-/// buffers of `out` and `scratch` have grown to the image size.
+/// surface rather than a hand (`Outline::is_surface`): bounded more by the growth volume than
+/// by an outline of its own, or by an outline mostly on more of the same surface, nearer and
+/// farther alike. Synthetic `leave_reenter` at 60 Hz (the hand out of view for ≈ 5 s, a wall at
+/// 1.1 m behind it), frames out of view that a tracker was given a "hand" on, before → after:
+/// 323–345 → 0–2 of ≈ 730 under ToF noise and structured light (seeds 8, 9, 10); no frame with
+/// the hand wholly in view lost. Allocation-free once the buffers of `out` and `scratch` have
+/// grown to the image size.
 pub fn segment_depth_only(
     depth: &DepthImage,
     camera: &Camera,
