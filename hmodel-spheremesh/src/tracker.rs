@@ -236,6 +236,8 @@ struct Problem<'m> {
     ctx: TrackingCtx<'m>,
     solver: LmSolver,
     ws: LmWorkspace,
+    /// The workspace of [`TrackingProblem::solve_aside`], which leaves `ws`'s report alone.
+    ws_aside: LmWorkspace,
     terms: Terms,
     mean_pose: Pose,
     timing: SolveTiming,
@@ -255,6 +257,15 @@ impl TrackingProblem for Problem<'_> {
             &mut CorrespondenceCallback,
             &mut self.timing,
         )
+    }
+
+    fn solve_aside(&mut self, pose: &mut Pose) -> bool {
+        let history = self.terms.temporal.suspend_history();
+        std::mem::swap(&mut self.ws, &mut self.ws_aside);
+        let solved = self.solve(pose);
+        std::mem::swap(&mut self.ws, &mut self.ws_aside);
+        self.terms.temporal.resume_history(history);
+        solved
     }
 
     fn refresh(&mut self, pose: &Pose) -> bool {
@@ -333,7 +344,7 @@ impl<'m> Tracker<'m> {
             solver,
             mean_pose,
         } = PriorSetup::new::<TrackerError>(sk, prior, &config.pose_prior, &config.lm)?;
-        let ws = solver.workspace();
+        let (ws, ws_aside) = (solver.workspace(), solver.workspace());
         let terms = Terms {
             enabled: config.enabled.clone(),
             d2m: D2m::new(config.d2m.clone()),
@@ -352,6 +363,7 @@ impl<'m> Tracker<'m> {
                 template,
                 ctx,
                 solver,
+                ws_aside,
                 ws,
                 terms,
                 mean_pose,

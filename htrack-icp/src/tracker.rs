@@ -246,6 +246,8 @@ struct Problem<'m> {
     ctx: TrackingCtx<'m>,
     solver: LmSolver,
     ws: LmWorkspace,
+    /// The workspace of [`TrackingProblem::solve_aside`], which leaves `ws`'s report alone.
+    ws_aside: LmWorkspace,
     terms: Terms,
     mean_pose: Pose,
     timing: SolveTiming,
@@ -267,6 +269,15 @@ impl TrackingProblem for Problem<'_> {
             &mut CorrespondenceCallback,
             &mut self.timing,
         )
+    }
+
+    fn solve_aside(&mut self, pose: &mut Pose) -> bool {
+        let history = self.terms.temporal.suspend_history();
+        std::mem::swap(&mut self.ws, &mut self.ws_aside);
+        let solved = self.solve(pose);
+        std::mem::swap(&mut self.ws, &mut self.ws_aside);
+        self.terms.temporal.resume_history(history);
+        solved
     }
 
     fn refresh(&mut self, pose: &Pose) -> bool {
@@ -379,7 +390,7 @@ impl<'m> Tracker<'m> {
             solver,
             mean_pose,
         } = PriorSetup::new::<TrackerError>(sk, prior, &config.pose_prior, &config.lm)?;
-        let ws = solver.workspace();
+        let (ws, ws_aside) = (solver.workspace(), solver.workspace());
         let terms = Terms {
             enabled: config.enabled.clone(),
             e3d: E3d::new(config.e3d.clone()),
@@ -398,6 +409,7 @@ impl<'m> Tracker<'m> {
             problem: Problem {
                 ctx,
                 solver,
+                ws_aside,
                 ws,
                 terms,
                 mean_pose,

@@ -11,6 +11,11 @@ pub trait TrackingProblem {
     /// Run the tracker's LM solve from `pose` in place; false when it failed or left a
     /// non-finite pose.
     fn solve(&mut self, pose: &mut Pose) -> bool;
+    /// [`Self::solve`] without the temporal history, leaving no trace on the sequence: the
+    /// history and what the tracker reports of its last solve stay as they were (the second
+    /// look at a placement, whose starts must not be pulled toward the tracked pose and which
+    /// must not move it when it stays).
+    fn solve_aside(&mut self, pose: &mut Pose) -> bool;
     /// Recompute the correspondences at `pose` (for scoring a solved hypothesis); false on
     /// failure.
     fn refresh(&mut self, pose: &Pose) -> bool;
@@ -64,7 +69,15 @@ pub struct FrameLoop {
     /// without a hand reports.
     fitted: Pose,
     has_fitted: bool,
+    /// Frames until the placement of the last re-initialization is looked at again.
+    recheck_in: Option<usize>,
 }
+
+/// A re-initialization places the hand on what it sees of it, which is often the first fingers
+/// of a hand entering the view, or part of a hand after a fast motion: this many frames later
+/// the placement hypotheses are solved again ([`TrackingProblem::solve_aside`]) and one that
+/// fits the frame better than the tracked pose replaces it.
+pub const RECHECK_FRAMES: usize = 10;
 
 impl FrameLoop {
     /// A loop that starts uninitialized at `fallback` (the first frame re-initializes).
@@ -78,6 +91,7 @@ impl FrameLoop {
             initialized: false,
             failed_run: 0,
             has_fitted: false,
+            recheck_in: None,
         }
     }
 
@@ -110,7 +124,8 @@ impl FrameLoop {
     /// re-initialization that failed on a patch of background taken for the hand would
     /// otherwise be held through every frame until the hand is back). A failed solve keeps the
     /// previous pose (`solver_failed`); [`LossParams::window`] failed frames in a row
-    /// re-initialize.
+    /// re-initialize. [`RECHECK_FRAMES`] frames after a re-initialization its hypotheses are
+    /// tried again beside the tracked pose (flag `reinitialized` when one of them wins).
     pub fn step(&mut self, problem: &mut impl TrackingProblem, num_points: usize) -> FrameOutcome {
         let mut out = FrameOutcome::default();
         if num_points < self.loss.min_points.max(1) {
@@ -120,6 +135,7 @@ impl FrameLoop {
             }
             self.initialized = false;
             self.failed_run = 0;
+            self.recheck_in = None;
             problem.clear_history();
             return out;
         }
@@ -148,6 +164,12 @@ impl FrameLoop {
         } else {
             self.failed_run = 0;
         }
+        if self.recheck_due(&out.flags) {
+            if let Some(better) = self.recheck(problem) {
+                out.flags.push("reinitialized");
+                stats = better;
+            }
+        }
         if stats.failed {
             out.flags.push("lost");
         } else {
@@ -166,22 +188,73 @@ impl FrameLoop {
     /// ([`FrameStats::is_poor_placement`]), and replace it only with one that is not.
     fn reinitialize(&mut self, problem: &mut impl TrackingProblem) {
         problem.clear_history();
-        let mut best: Option<(f64, Pose, bool)> = None;
+        self.recheck_in = Some(RECHECK_FRAMES);
         let current = self.initialized.then(|| Hypothesis {
             pose: self.pose.clone(),
             backup: false,
         });
-        let (backups, firsts): (Vec<_>, Vec<_>) = current
-            .into_iter()
-            .chain(problem.hypotheses())
-            .partition(|h| h.backup);
+        let starts = current.into_iter().chain(problem.hypotheses());
+        let best = self.best_start(problem, starts, |p, pose| p.solve(pose));
+        self.pose = best.map_or_else(|| self.fallback.clone(), |(_, p, _)| p);
+        // Leave the problem at the chosen pose for the frame statistics.
+        let _ = problem.refresh(&self.pose);
+    }
+
+    /// Counts down to the second look at the last placement; true on the frame it is due
+    /// (not one that re-initialized already).
+    fn recheck_due(&mut self, flags: &[&str]) -> bool {
+        let Some(n) = self.recheck_in.as_mut() else {
+            return false;
+        };
+        if flags.contains(&"reinitialized") {
+            return false;
+        }
+        *n = n.saturating_sub(1);
+        let due = *n == 0;
+        if due {
+            self.recheck_in = None;
+        }
+        due
+    }
+
+    /// The second look at a placement: the hypotheses solved aside
+    /// ([`TrackingProblem::solve_aside`]) against the tracked pose, both scored at their
+    /// refreshed correspondences. A hypothesis that scores better and is not a poor placement
+    /// replaces the pose (the history is then cleared, as on a re-initialization) and its frame
+    /// statistics are returned; otherwise nothing of the sequence changes.
+    fn recheck(&mut self, problem: &mut impl TrackingProblem) -> Option<FrameStats> {
+        if !problem.refresh(&self.pose) {
+            return None;
+        }
+        let tracked = problem.frame_stats(&self.loss).score();
+        let starts = problem.hypotheses();
+        let (score, pose, poor) =
+            self.best_start(problem, starts, |p, pose| p.solve_aside(pose))?;
+        if poor || score >= tracked || !problem.refresh(&pose) {
+            return None;
+        }
+        self.pose = pose;
+        problem.clear_history();
+        Some(problem.frame_stats(&self.loss))
+    }
+
+    /// The best of `starts` solved by `solve` as (score, pose, poor placement): the backups
+    /// only when the best of the others is a poor placement, and then only one that is not.
+    fn best_start<P: TrackingProblem>(
+        &self,
+        problem: &mut P,
+        starts: impl IntoIterator<Item = Hypothesis>,
+        solve: impl Fn(&mut P, &mut Pose) -> bool,
+    ) -> Option<(f64, Pose, bool)> {
+        let (backups, firsts): (Vec<_>, Vec<_>) = starts.into_iter().partition(|h| h.backup);
+        let mut best: Option<(f64, Pose, bool)> = None;
         for (round, list) in [firsts, backups].into_iter().enumerate() {
             if round == 1 && best.as_ref().is_some_and(|b| !b.2) {
                 break;
             }
             for h in list {
                 let mut pose = h.pose;
-                if !problem.solve(&mut pose) || !problem.refresh(&pose) {
+                if !solve(problem, &mut pose) || !problem.refresh(&pose) {
                     continue;
                 }
                 let stats = problem.frame_stats(&self.loss);
@@ -192,9 +265,7 @@ impl FrameLoop {
                 }
             }
         }
-        self.pose = best.map_or_else(|| self.fallback.clone(), |(_, p, _)| p);
-        // Leave the problem at the chosen pose for the frame statistics.
-        let _ = problem.refresh(&self.pose);
+        best
     }
 }
 
@@ -209,6 +280,8 @@ mod tests {
         reach: f64,
         at: f64,
         solves: usize,
+        /// Of `solves`, those made aside.
+        aside: usize,
         cleared: usize,
         /// Offsets from the target of the hypotheses, and whether each is a backup.
         starts: Vec<(f64, bool)>,
@@ -221,6 +294,7 @@ mod tests {
                 reach,
                 at: 0.0,
                 solves: 0,
+                aside: 0,
                 cleared: 0,
                 starts,
             }
@@ -254,6 +328,10 @@ mod tests {
                     backup,
                 })
                 .collect()
+        }
+        fn solve_aside(&mut self, pose: &mut Pose) -> bool {
+            self.aside += 1;
+            self.solve(pose)
         }
         fn clear_history(&mut self) {
             self.cleared += 1;
@@ -325,5 +403,50 @@ mod tests {
             fl.pose.values[0], 3.0,
             "the last fitted pose, not the failed one"
         );
+    }
+
+    /// A placement made on part of the hand (a poor start that still explains the data well
+    /// enough not to be lost) is looked at again [`RECHECK_FRAMES`] frames later: a start that
+    /// now fits better wins, one that does not leaves no trace.
+    #[test]
+    fn a_placement_is_looked_at_again() {
+        let mut fl = FrameLoop::new(Pose { values: vec![0.0] }, LossParams::default());
+        let mut toy = Toy::new(0.0, 3.0, vec![(4.0, false)]);
+        assert_eq!(fl.step(&mut toy, 500).flags, ["reinitialized"]);
+        assert_eq!(fl.pose.values[0], 4.0, "out of the solve's reach, not lost");
+        // Another start that fits worse than the tracked pose: nothing changes.
+        toy.starts = vec![(5.0, false)];
+        let cleared = toy.cleared;
+        for _ in 0..RECHECK_FRAMES {
+            assert!(fl.step(&mut toy, 500).flags.is_empty());
+            assert_eq!(fl.pose.values[0], 4.0);
+        }
+        assert_eq!(
+            (toy.aside, toy.cleared),
+            (1, cleared),
+            "looked at once, aside"
+        );
+        // After the next placement, a start within reach wins on the tenth frame.
+        fl.set_pose(Pose { values: vec![4.0] });
+        fl.initialized = false;
+        assert_eq!(fl.step(&mut toy, 500).flags, ["reinitialized"]);
+        toy.starts = vec![(1.0, false)];
+        for _ in 1..RECHECK_FRAMES {
+            assert!(fl.step(&mut toy, 500).flags.is_empty());
+        }
+        assert_eq!(fl.step(&mut toy, 500).flags, ["reinitialized"]);
+        assert_eq!(fl.pose.values[0], 0.0);
+        assert_eq!(
+            toy.cleared,
+            cleared + 2,
+            "the history is cleared when a start wins"
+        );
+        // Once only: the next frames track.
+        toy.starts = vec![(-1.0, false)];
+        let aside = toy.aside;
+        for _ in 0..2 * RECHECK_FRAMES {
+            assert!(fl.step(&mut toy, 500).flags.is_empty());
+        }
+        assert_eq!(toy.aside, aside);
     }
 }

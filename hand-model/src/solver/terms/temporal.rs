@@ -79,6 +79,17 @@ impl Temporal {
         self.history = 0;
     }
 
+    /// Set the history aside: the term is empty until [`Temporal::resume_history`] is given
+    /// what this returns (the stored positions are kept; push no frame in between).
+    pub fn suspend_history(&mut self) -> usize {
+        std::mem::take(&mut self.history)
+    }
+
+    /// Bring back a history set aside by [`Temporal::suspend_history`].
+    pub fn resume_history(&mut self, suspended: usize) {
+        self.history = suspended.min(2);
+    }
+
     /// Record a finished frame: `k_{t−2} ← k_{t−1}`, `k_{t−1} ←` the points under `posed`.
     /// Allocation-free.
     pub fn push_frame(&mut self, posed: &PosedSkeleton) -> Result<(), TermError> {
