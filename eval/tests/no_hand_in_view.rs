@@ -11,7 +11,9 @@
 //! ToF (last 30 frames, the hand back in view). Now 1 of the 172 frames is given a hand (the
 //! forearm is still in view just after the hand left), in both trackers and noise models, and
 //! the last 30 frames are tracked at 1.01 / 2.23 mm (Ch. 3 / Ch. 2) under ToF and 0.34 / 7.13 mm
-//! noise-free.
+//! noise-free; 0.34 / 2.12 mm since session 28's second look at each placement
+//! ([`hand_model::solver::RECHECK_FRAMES`]), which undid the cylinders' placement of the hand
+//! entering the view with every finger shifted by one.
 
 use eval::synthetic::{SyntheticRun, SyntheticSequence, SyntheticSpec};
 use hand_model::cylinder::CylinderModel;

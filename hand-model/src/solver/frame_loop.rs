@@ -1,6 +1,7 @@
 //! The per-frame control flow shared by the trackers (thesis §2.4 Fig. 2.3, §3.3): warm start
 //! from the previous frame, loss detection over a window of failed frames and re-initialization
-//! from several hypotheses ([`super::loss`]). The trackers provide the solve itself through
+//! from several hypotheses ([`super::loss`]), looked at again a few frames later
+//! ([`RECHECK_FRAMES`]). The trackers provide the solve itself through
 //! [`TrackingProblem`]; this loop only decides which poses to solve from and which to keep.
 
 use super::loss::{FrameStats, LossParams};
@@ -77,6 +78,13 @@ pub struct FrameLoop {
 /// of a hand entering the view, or part of a hand after a fast motion: this many frames later
 /// the placement hypotheses are solved again ([`TrackingProblem::solve_aside`]) and one that
 /// fits the frame better than the tracked pose replaces it.
+///
+/// Synthetic `leave_reenter` (30 Hz, seed 8, the hand leaves the view and comes back), mean
+/// keypoint error over the frames with the hand wholly in view: the Ch. 2 cylinders 12.32 →
+/// 4.30 mm noise-free and 6.53 → 5.26 mm under ToF (they had placed the hand entering the view
+/// with every finger shifted by one, a fit their loss test cannot tell from a good one); the
+/// Ch. 3 tracker 51.88 → 3.39 and 4.65 → 3.05 mm. The 34 library sequences track bit for bit
+/// as without it, but `leave_reenter`.
 pub const RECHECK_FRAMES: usize = 10;
 
 impl FrameLoop {

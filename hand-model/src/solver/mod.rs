@@ -82,7 +82,7 @@ pub mod terms;
 mod tests;
 
 pub use blocks::{PackedBlocks, BLOCK_DOFS, MAX_BLOCKS};
-pub use frame_loop::{FrameLoop, FrameOutcome, Hypothesis, TrackingProblem};
+pub use frame_loop::{FrameLoop, FrameOutcome, Hypothesis, TrackingProblem, RECHECK_FRAMES};
 pub use irls::IrlsParams;
 pub use lm::{
     callback_fn, FnCallback, IterInfo, LmCallback, LmError, LmOptions, LmReport, LmSolver,
