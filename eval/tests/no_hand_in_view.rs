@@ -98,8 +98,10 @@ fn check(name: &str, (away, tracked_away, missed, tail): (usize, usize, usize, f
         missed, 0,
         "{name}: frames with the hand in view flagged no_hand"
     );
+    // Found again, every finger in its place: the cylinders' placement with the fingers
+    // shifted by one (7.13 mm noise-free before the second look at placements) fails here.
     assert!(
-        tail < 10.0,
+        tail < 5.0,
         "{name}: the hand is found again ({tail:.2} mm)"
     );
 }
