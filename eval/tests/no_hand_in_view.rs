@@ -100,10 +100,7 @@ fn check(name: &str, (away, tracked_away, missed, tail): (usize, usize, usize, f
     );
     // Found again, every finger in its place: the cylinders' placement with the fingers
     // shifted by one (7.13 mm noise-free before the second look at placements) fails here.
-    assert!(
-        tail < 5.0,
-        "{name}: the hand is found again ({tail:.2} mm)"
-    );
+    assert!(tail < 5.0, "{name}: the hand is found again ({tail:.2} mm)");
 }
 
 #[test]
