@@ -174,7 +174,9 @@ impl FrameLoop {
         }
         if self.recheck_due(&out.flags) {
             if let Some(better) = self.recheck(problem) {
+                // A new placement, as after the window's re-initialization.
                 out.flags.push("reinitialized");
+                self.failed_run = 0;
                 stats = better;
             }
         }
