@@ -271,13 +271,9 @@ impl TrackingProblem for Problem<'_> {
         )
     }
 
-    fn solve_aside(&mut self, pose: &mut Pose) -> bool {
-        let history = self.terms.temporal.suspend_history();
+    fn set_aside(&mut self, aside: bool) {
         std::mem::swap(&mut self.ws, &mut self.ws_aside);
-        let solved = self.solve(pose);
-        std::mem::swap(&mut self.ws, &mut self.ws_aside);
-        self.terms.temporal.resume_history(history);
-        solved
+        self.terms.temporal.set_history_aside(aside);
     }
 
     fn refresh(&mut self, pose: &Pose) -> bool {

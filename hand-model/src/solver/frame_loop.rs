@@ -12,11 +12,19 @@ pub trait TrackingProblem {
     /// Run the tracker's LM solve from `pose` in place; false when it failed or left a
     /// non-finite pose.
     fn solve(&mut self, pose: &mut Pose) -> bool;
+    /// Enter (`true`) or leave (`false`) the state of [`Self::solve_aside`]: the temporal
+    /// history set aside, and the solves' report kept apart from the frame's.
+    fn set_aside(&mut self, aside: bool);
     /// [`Self::solve`] without the temporal history, leaving no trace on the sequence: the
     /// history and what the tracker reports of its last solve stay as they were (the second
     /// look at a placement, whose starts must not be pulled toward the tracked pose and which
     /// must not move it when it stays).
-    fn solve_aside(&mut self, pose: &mut Pose) -> bool;
+    fn solve_aside(&mut self, pose: &mut Pose) -> bool {
+        self.set_aside(true);
+        let solved = self.solve(pose);
+        self.set_aside(false);
+        solved
+    }
     /// Recompute the correspondences at `pose` (for scoring a solved hypothesis); false on
     /// failure.
     fn refresh(&mut self, pose: &Pose) -> bool;
@@ -355,9 +363,8 @@ mod tests {
                 })
                 .collect()
         }
-        fn solve_aside(&mut self, pose: &mut Pose) -> bool {
-            self.aside += 1;
-            self.solve(pose)
+        fn set_aside(&mut self, aside: bool) {
+            self.aside += usize::from(aside);
         }
         fn clear_history(&mut self) {
             self.cleared += 1;

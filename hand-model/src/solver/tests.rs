@@ -380,6 +380,38 @@ fn shuffled_term_order_gives_the_same_system() {
     }
 }
 
+/// A history set aside leaves the temporal term empty and comes back as it was; a cleared one
+/// does not come back.
+#[test]
+fn temporal_history_set_aside_comes_back_unchanged() {
+    let t = default_right_hand();
+    let sk = &t.skeleton;
+    let mut rng = ChaCha8Rng::seed_from_u64(9);
+    let pose = random_pose(sk, &mut rng, 0.0);
+    let ctx = SkeletonCtx::new(sk, &pose);
+    let mut temporal = Temporal::new(sphere_mesh_points(&t), &TemporalParams::default());
+    for _ in 0..2 {
+        let past = perturbed(sk, &pose, &mut rng, 0.1, 0.1);
+        temporal.push_frame(&PosedSkeleton::new(sk, &past)).unwrap();
+    }
+    let n = sk.num_dofs();
+    let (before, e0) = assemble(&ctx, &[&temporal], n);
+    assert!(e0 > 0.0);
+    temporal.set_history_aside(true);
+    assert_eq!(temporal.history_len(), 0);
+    assert_eq!(assemble(&ctx, &[&temporal], n).1, 0.0);
+    temporal.set_history_aside(false);
+    let (after, e1) = assemble(&ctx, &[&temporal], n);
+    assert_eq!(
+        (e1, after.lhs(), after.rhs()),
+        (e0, before.lhs(), before.rhs())
+    );
+    temporal.set_history_aside(true);
+    temporal.clear_history();
+    temporal.set_history_aside(false);
+    assert_eq!(temporal.history_len(), 0);
+}
+
 fn assemble<'a>(
     ctx: &SkeletonCtx<'a>,
     terms: &[&dyn EnergyTerm<SkeletonCtx<'a>>],

@@ -49,6 +49,8 @@ pub struct Temporal {
     prev1: Vec<Vector3<f64>>,
     prev2: Vec<Vector3<f64>>,
     history: usize,
+    /// The history set aside by [`Temporal::set_history_aside`].
+    aside: usize,
 }
 
 impl Temporal {
@@ -61,6 +63,7 @@ impl Temporal {
             prev1: vec![Vector3::zeros(); n],
             prev2: vec![Vector3::zeros(); n],
             history: 0,
+            aside: 0,
         }
     }
 
@@ -77,17 +80,17 @@ impl Temporal {
     /// Forget the history (after a re-initialization).
     pub fn clear_history(&mut self) {
         self.history = 0;
+        self.aside = 0;
     }
 
-    /// Set the history aside: the term is empty until [`Temporal::resume_history`] is given
-    /// what this returns (the stored positions are kept; push no frame in between).
-    pub fn suspend_history(&mut self) -> usize {
-        std::mem::take(&mut self.history)
-    }
-
-    /// Bring back a history set aside by [`Temporal::suspend_history`].
-    pub fn resume_history(&mut self, suspended: usize) {
-        self.history = suspended.min(2);
+    /// Set the history aside (`true`: the term is empty, the stored positions kept) or bring
+    /// it back (`false`); push no frame in between.
+    pub fn set_history_aside(&mut self, aside: bool) {
+        if aside {
+            self.aside = self.aside.max(std::mem::take(&mut self.history));
+        } else {
+            self.history = self.history.max(std::mem::take(&mut self.aside));
+        }
     }
 
     /// Record a finished frame: `k_{t−2} ← k_{t−1}`, `k_{t−1} ←` the points under `posed`.
