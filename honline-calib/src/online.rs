@@ -356,6 +356,9 @@ pub struct OnlineCalibrator {
     innovation_rejected: usize,
     /// Frames failed in a row by the loss criterion ([`OnlineCalibrator::note_loss`]).
     failed_run: usize,
+    /// The pose of the last solved frame not flagged `lost` (`None` before one), what a frame
+    /// without a hand reports.
+    fitted: Option<Pose>,
 }
 
 impl OnlineCalibrator {
@@ -401,6 +404,7 @@ impl OnlineCalibrator {
             innovation_median: Vec::with_capacity(INNOVATION_WINDOW),
             innovation_rejected: 0,
             failed_run: 0,
+            fitted: None,
             ctx,
             solver,
             ws,
@@ -629,7 +633,8 @@ impl OnlineCalibrator {
 
     /// Track one frame and update the shape estimate (crate docs). Never returns a non-finite
     /// value or an invalid shape: a frame that cannot be solved keeps the previous pose and
-    /// estimate and is flagged (`no_hand`, `solver_failed`).
+    /// estimate and is flagged (`solver_failed`); a frame without a hand (`no_hand`) reports
+    /// the pose of the last frame solved without being flagged `lost`.
     ///
     /// The record's `timing_us` splits the frame (µs) so that it compares stage by stage with
     /// the plain tracker's ([`hmodel_spheremesh::Tracker::track`]): `correspondences` (the
@@ -740,6 +745,12 @@ impl OnlineCalibrator {
                     }
                     solved = true;
                     self.pose = pose;
+                    if !lost {
+                        match &mut self.fitted {
+                            Some(f) => f.values.clone_from(&self.pose.values),
+                            none => *none = Some(self.pose.clone()),
+                        }
+                    }
                     self.residual_scale =
                         median_abs_residual(&self.ctx.tracking, &mut self.residuals);
                 }
@@ -767,7 +778,12 @@ impl OnlineCalibrator {
                 rec.flags.push("solver_failed".into());
             }
         } else {
+            // As the Ch. 3 tracker's frame loop: the last pose that fitted, not that of a
+            // placement on a patch of background taken for the hand before the hand left.
             rec.flags.push("no_hand".into());
+            if let Some(f) = &self.fitted {
+                self.pose.values.clone_from(&f.values);
+            }
         }
         // The estimators (§4.3.1–4.3.3).
         let t2 = Instant::now();

@@ -329,6 +329,29 @@ fn lost_frames_leave_the_shape_and_ask_for_placement() {
     assert!(out.record.energies["mean_distance_mm"] < 1.0);
 }
 
+/// A frame without a hand reports the pose of the last frame that fitted, not that of a lost
+/// placement before it (a patch of background taken for the hand as it left the view).
+#[test]
+fn no_hand_reports_the_last_fitted_pose() {
+    let base = default_right_hand();
+    let (_, truth) = subject(&base, 0.1, 3);
+    let camera = Camera::sr300_qvga();
+    let mut calib = OnlineCalibrator::new(&base, OnlineConfig::default(), None).unwrap();
+    let frame = rendered_frame(&truth, &pose(&truth, 0, true), &camera, 1500).unwrap();
+    calib.set_pose(&pose(&truth, 0, true)).unwrap();
+    let fitted = calib.track(&frame, 0, 0.0);
+    assert!(fitted.solved && fitted.record.flags.is_empty());
+    let mut off = pose(&truth, 0, true);
+    off.values[base.skeleton.dof_index("global_tx").unwrap()] += 400.0;
+    calib.set_pose(&off).unwrap();
+    assert_eq!(calib.track(&frame, 1, 0.0).record.flags, ["lost"]);
+    let away = calib.track(&PreprocessedFrame::default(), 2, 0.0);
+    assert_eq!(away.record.flags, ["no_hand"]);
+    let values =
+        |f: &honline_calib::OnlineFrame| f.record.pose.values().copied().collect::<Vec<f64>>();
+    assert_eq!(values(&away), values(&fitted));
+}
+
 /// Under heavy depth noise (σ = 12 mm) frames at the true pose are ≈ 0.62 σ from the model:
 /// the loss criterion follows the measured noise ([`hand_model::solver::LossParams::for_noise`])
 /// and lets them teach the shape; with hmodel's fixed 6 mm every one was refused as lost.
