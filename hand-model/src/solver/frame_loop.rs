@@ -91,8 +91,8 @@ pub struct FrameLoop {
 /// keypoint error over the frames with the hand wholly in view: the Ch. 2 cylinders 12.32 →
 /// 4.30 mm noise-free and 6.53 → 5.26 mm under ToF (they had placed the hand entering the view
 /// with every finger shifted by one, a fit their loss test cannot tell from a good one); the
-/// Ch. 3 tracker 51.88 → 3.39 and 4.65 → 3.05 mm. The 34 library sequences track bit for bit
-/// as without it, but `leave_reenter`.
+/// Ch. 3 tracker 51.88 → 3.39 and 4.65 → 3.05 mm. On the 34 library sequences (but
+/// `leave_reenter`) and 74 ToF cold starts no look replaced a pose, with either tracker.
 pub const RECHECK_FRAMES: usize = 10;
 
 impl FrameLoop {
