@@ -14,6 +14,15 @@
 //! noise-free; 0.34 / 2.12 mm since session 28's second look at each placement
 //! ([`hand_model::solver::RECHECK_FRAMES`]), which undid the cylinders' placement of the hand
 //! entering the view with every finger shifted by one.
+//!
+//! The online calibrator alone (session 28) says `no_hand` as the trackers do, but does not
+//! find the returning hand: 113.59 mm (ToF) and 118.42 mm (noise-free) over the last 30 frames.
+//! Its own placement is the PCA mean pose on the points' centroid, once per loss window, with
+//! none of the trackers' hypotheses or second look; `hands track --calibrate online` places the
+//! hand with the Ch. 3 tracker instead (`tools::trackers`), and the library's ToF
+//! `leave_reenter` tracks there as with the Ch. 3 tracker (119.36 against 113.97 mm over the
+//! whole sequence, most of it the held pose while the hand is away). That check is printed, not
+//! asserted.
 
 use eval::synthetic::{SyntheticRun, SyntheticSequence, SyntheticSpec};
 use hand_model::cylinder::CylinderModel;
@@ -80,7 +89,12 @@ fn score(seq: &SyntheticSequence, run: &SyntheticRun) -> (usize, usize, usize, f
     )
 }
 
-fn check(name: &str, (away, tracked_away, missed, tail): (usize, usize, usize, f64)) {
+/// `found_again`: whether the last 30 frames must track within 5 mm.
+fn check(
+    name: &str,
+    (away, tracked_away, missed, tail): (usize, usize, usize, f64),
+    found_again: bool,
+) {
     eprintln!(
         "{name}: {away} frames out of view, {tracked_away} of them given a hand; \
          {missed} in-view frames no_hand; last 30 frames {tail:.2} mm"
@@ -100,7 +114,9 @@ fn check(name: &str, (away, tracked_away, missed, tail): (usize, usize, usize, f
     );
     // Found again, every finger in its place: the cylinders' placement with the fingers
     // shifted by one (7.13 mm noise-free before the second look at placements) fails here.
-    assert!(tail < 5.0, "{name}: the hand is found again ({tail:.2} mm)");
+    if found_again {
+        assert!(tail < 5.0, "{name}: the hand is found again ({tail:.2} mm)");
+    }
 }
 
 #[test]
@@ -118,7 +134,7 @@ fn trackers_say_no_hand_while_the_hand_is_out_of_view() {
         let run = seq
             .run(|f, t| tracker.track(f, t.frame, t.timestamp), |_| {})
             .unwrap();
-        check(&format!("sphere-mesh, {noise}"), score(&seq, &run));
+        check(&format!("sphere-mesh, {noise}"), score(&seq, &run), true);
 
         let mut seq = sequence(noise);
         let model = CylinderModel::from_sphere_mesh_with_wrist(seq.template()).unwrap();
@@ -128,6 +144,24 @@ fn trackers_say_no_hand_while_the_hand_is_out_of_view() {
         let run = seq
             .run(|f, t| tracker.track(f, t.frame, t.timestamp), |_| {})
             .unwrap();
-        check(&format!("cylinders, {noise}"), score(&seq, &run));
+        check(&format!("cylinders, {noise}"), score(&seq, &run), true);
+
+        let mut seq = sequence(noise);
+        let mut calib = honline_calib::OnlineCalibrator::new(
+            &template,
+            honline_calib::OnlineConfig::default(),
+            Some(&prior),
+        )
+        .unwrap();
+        let run = seq
+            .run(|f, t| calib.track(f, t.frame, t.timestamp).record, |_| {})
+            .unwrap();
+        // Alone, without the Ch. 3 tracker that places the hand for `hands track` (module
+        // docs), the calibrator does not find the returning hand.
+        check(
+            &format!("online calibration, {noise}"),
+            score(&seq, &run),
+            false,
+        );
     }
 }

@@ -661,6 +661,8 @@ impl OnlineCalibrator {
             if !self.initialized {
                 self.pose = self.placed_pose(&frame.points);
                 self.initialized = true;
+                // A placement, as `set_pose`: the frames before it are not this hand's motion.
+                self.temporal.clear_history();
             }
             self.set_prior();
             let t = Instant::now();
