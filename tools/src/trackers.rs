@@ -142,7 +142,8 @@ pub struct OnlineTracker<'m> {
 /// calibration: all unchanged.
 #[derive(Clone, Copy, Debug, Default)]
 struct Shadow {
-    /// Frames watched since the placement or the last reset.
+    /// Frames watched since the placement, the seed's last placement of its own or the last
+    /// reset.
     frames: usize,
     /// Consecutive frames in which the calibrator fitted clearly worse.
     worse: usize,
