@@ -359,6 +359,8 @@ pub struct OnlineCalibrator {
     /// The pose of the last solved frame not flagged `lost` (`None` before one), what a frame
     /// without a hand reports.
     fitted: Option<Pose>,
+    /// The pose prior, for the Ch. 3 tracker that places the hand ([`Self::placed_pose`]).
+    prior: Option<PcaPrior>,
 }
 
 impl OnlineCalibrator {
@@ -405,6 +407,7 @@ impl OnlineCalibrator {
             innovation_rejected: 0,
             failed_run: 0,
             fitted: None,
+            prior: prior.cloned(),
             ctx,
             solver,
             ws,
@@ -495,9 +498,10 @@ impl OnlineCalibrator {
 
     /// Whether the next frame is solved from [`OnlineCalibrator::pose`]; false at the start
     /// and after `tracker.loss.window` failed frames in a row: the next frame then places the
-    /// PCA mean pose on its points, unless a caller places the hand first
-    /// ([`OnlineCalibrator::set_pose`], e.g. from the Ch. 3 tracker's re-initialization
-    /// hypotheses, as `hands track` does; it also does so after a frame without a hand).
+    /// hand as the Ch. 3 tracker's re-initialization does, with the current shape, unless a
+    /// caller places it first ([`OnlineCalibrator::set_pose`], e.g. from a Ch. 3 tracker that
+    /// goes on watching, as `hands track` does; it also does so after a frame without a
+    /// hand).
     pub fn is_placed(&self) -> bool {
         self.initialized
     }
@@ -574,9 +578,23 @@ impl OnlineCalibrator {
         Ok(())
     }
 
+    /// Where the hand is placed when no caller placed it ([`OnlineCalibrator::set_pose`]): the
+    /// Ch. 3 tracker's re-initialization on `frame` with the current shape (its hypotheses,
+    /// the best fit kept), else the mean pose on the points' centroid.
+    fn placed_pose(&self, frame: &PreprocessedFrame) -> Pose {
+        let config = self.config.tracker.clone();
+        match hmodel_spheremesh::Tracker::new(self.template(), config, self.prior.as_ref()) {
+            Ok(mut tracker) => {
+                tracker.track(frame, 0, 0.0);
+                tracker.pose().clone()
+            }
+            Err(_) => self.centered_pose(&frame.points),
+        }
+    }
+
     /// The mean pose moved so that the model's sphere centroid sits 10 mm behind the points'
-    /// centroid (the first frame without [`OnlineCalibrator::set_pose`]).
-    fn placed_pose(&self, points: &[Vector3<f64>]) -> Pose {
+    /// centroid.
+    fn centered_pose(&self, points: &[Vector3<f64>]) -> Pose {
         let mut pose = self.problem.mean_pose.clone();
         let n = points.len().max(1) as f64;
         let target = points.iter().sum::<Vector3<f64>>() / n + Vector3::new(0.0, 0.0, 10.0);
@@ -659,7 +677,7 @@ impl OnlineCalibrator {
             self.ctx.tracking.set_frame(frame);
             self.update_noise(frame);
             if !self.initialized {
-                self.pose = self.placed_pose(&frame.points);
+                self.pose = self.placed_pose(frame);
                 self.initialized = true;
                 // A placement, as `set_pose`: the frames before it are not this hand's motion.
                 self.temporal.clear_history();
