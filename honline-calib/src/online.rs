@@ -580,16 +580,19 @@ impl OnlineCalibrator {
 
     /// Where the hand is placed when no caller placed it ([`OnlineCalibrator::set_pose`]): the
     /// Ch. 3 tracker's re-initialization on `frame` with the current shape (its hypotheses,
-    /// the best fit kept), else the mean pose on the points' centroid.
+    /// the best fit kept), else (the tracker cannot be built or finds no hand there) the mean
+    /// pose on the points' centroid.
     fn placed_pose(&self, frame: &PreprocessedFrame) -> Pose {
         let config = self.config.tracker.clone();
-        match hmodel_spheremesh::Tracker::new(self.template(), config, self.prior.as_ref()) {
-            Ok(mut tracker) => {
-                tracker.track(frame, 0, 0.0);
-                tracker.pose().clone()
+        if let Ok(mut tracker) =
+            hmodel_spheremesh::Tracker::new(self.template(), config, self.prior.as_ref())
+        {
+            let rec = tracker.track(frame, 0, 0.0);
+            if !rec.flags.iter().any(|f| f == "no_hand") {
+                return tracker.pose().clone();
             }
-            Err(_) => self.centered_pose(&frame.points),
         }
+        self.centered_pose(&frame.points)
     }
 
     /// The mean pose moved so that the model's sphere centroid sits 10 mm behind the points'
