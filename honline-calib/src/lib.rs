@@ -59,9 +59,9 @@
 //!   (`tracker.loss`: mean point distance > 6 mm or > 15 % of the points unexplained) is
 //!   flagged `lost` and refused like the innovation gate's frames — a mis-tracked frame must
 //!   not teach the shape; after `loss.window` (3) such frames in a row the calibrator asks to
-//!   be placed again ([`OnlineCalibrator::is_placed`]). `hands track --calibrate online` then
-//!   places it with the Ch. 3 tracker's re-initialization hypotheses, as after a frame without
-//!   a hand. Measured (`teaser`, noise-free, 100 points a frame): 112.4 → 20.2 mm mean
+//!   be placed again ([`OnlineCalibrator::is_placed`]), which it then does with the Ch. 3
+//!   tracker's re-initialization hypotheses ([`watch`]), as after a frame without a hand.
+//!   Measured (`teaser`, noise-free, 100 points a frame): 112.4 → 20.2 mm mean
 //!   keypoint error; at the default 2500 points nothing changes (0.47 mm, no frame lost).
 //!   Since session 24 both distances grow with the measured depth noise above 6 mm (σ̂ and
 //!   2.5 σ̂, [`hand_model::solver::LossParams::for_noise`]), as does the along-ray slide (1.5 σ̂,
@@ -209,13 +209,15 @@
 //!   palm subsets; the pose prior off; twice the measurement weight: 3.1–3.6 mm). The offline
 //!   calibration of Ch. 3 reaches 1.01 mm from 8 frames with its per-sphere offsets (2.19 mm
 //!   with β and rest rotations alone): what β lacks is the palm spheres' placement. The random subjects of the acceptance tests live inside β and do not show this.
-//! - Not yet here: loss detection and re-initialization (the first pose comes from
-//!   [`OnlineCalibrator::set_pose`] or the PCA mean placed on the points). `hands track
-//!   --calibrate online` places the hand with the Ch. 3 tracker, which then watches the
-//!   calibrator for 30 frames and restarts it from its own pose with the starting shape should
-//!   it fit clearly worse (flag `shape_reset`, session 25): started on a fist, the calibrator
-//!   otherwise bent its still uncertain shape to the open mean pose it was placed in and kept
-//!   it (ToF `fist` from its 60th frame: 16.57 → 2.80 mm).
+//! - Beyond the thesis (whose first pose came from a known pose, §4.4.2): the calibrator
+//!   places the hand itself ([`watch`]). At the first frame, after a frame without a hand and
+//!   after a lost run, a Ch. 3 tracker of the starting template (the *seed*) places it with its
+//!   re-initialization hypotheses, then tracks beside it for 30 frames and restarts it from its
+//!   own pose with the starting shape should it fit clearly worse (flag `shape_reset`, session
+//!   25, in `hands track` until session 29): started on a fist, the calibrator otherwise bent
+//!   its still uncertain shape to the open mean pose it was placed in and kept it (ToF `fist`
+//!   from its 60th frame: 16.57 → 2.80 mm). [`OnlineCalibrator::set_pose`] places it instead
+//!   and ends the watch.
 //! - The collision term (Ch. 3) tolerates the overlap the model's pills have at the rest pose;
 //!   that overlap belongs to the shape, so the term is rebuilt on the current β whenever β
 //!   moved. Kept at the starting template's, it counted a thicker-fingered estimate's own rest
@@ -249,6 +251,7 @@ mod offline;
 mod online;
 mod shape;
 pub mod terms;
+pub mod watch;
 
 pub use display::element_uncertainty;
 pub use filter::{marginal_certainty, marginal_information, Estimator, ShapeBelief};

@@ -21,6 +21,7 @@ use crate::filter::{marginal_certainty_into, Estimator, InfoScratch, ShapeBelief
 use crate::frame::FrameProblem;
 use crate::shape::ShapeSubset;
 use crate::terms::{IekfPrior, Layout, OnlineCtx};
+use crate::watch::Shadow;
 
 /// Settings of the online calibration.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -316,8 +317,9 @@ impl LmCallback<OnlineCtx> for ShapeCallback<'_> {
 }
 
 /// Joint tracking and online calibration of the sphere-mesh model (thesis Ch. 4, module docs of
-/// the crate). One per sequence.
-pub struct OnlineCalibrator {
+/// the crate). One per sequence; it places the hand itself with a Ch. 3 tracker of the
+/// starting template that then watches it for a while ([`crate::watch`]).
+pub struct OnlineCalibrator<'m> {
     problem: FrameProblem,
     config: OnlineConfig,
     solver: LmSolver,
@@ -359,15 +361,28 @@ pub struct OnlineCalibrator {
     /// The pose of the last solved frame not flagged `lost` (`None` before one), what a frame
     /// without a hand reports.
     fitted: Option<Pose>,
-    /// The pose prior, for the Ch. 3 tracker that places the hand ([`Self::placed_pose`]).
+    /// The pose prior, for the seed.
     prior: Option<PcaPrior>,
+    /// The starting template, the seed's.
+    start: &'m SphereMeshTemplate,
+    /// The Ch. 3 tracker of the starting template whose re-initialization places the
+    /// calibrator whenever it is not placed (the first frame, after a frame without a hand or
+    /// a lost run) and which then tracks beside it for a while ([`crate::watch`]); `None` when
+    /// no watch is on, or should it fail to build (the calibrator then places the PCA mean
+    /// pose on the points).
+    seed: Option<hmodel_spheremesh::Tracker<'m>>,
+    /// `Some` while the seed, having placed the hand, tracks beside the calibrator.
+    shadow: Option<Shadow>,
+    /// Whether the last frame had no hand: the next is placed again, not solved from the pose
+    /// the hand left at.
+    hand_left: bool,
 }
 
-impl OnlineCalibrator {
+impl<'m> OnlineCalibrator<'m> {
     /// Calibrate from `base` (the default template, or any with the honline β basis) with
     /// `config` and an optional PCA pose prior.
     pub fn new(
-        base: &SphereMeshTemplate,
+        base: &'m SphereMeshTemplate,
         config: OnlineConfig,
         prior: Option<&PcaPrior>,
     ) -> Result<Self, OnlineError> {
@@ -408,6 +423,10 @@ impl OnlineCalibrator {
             failed_run: 0,
             fitted: None,
             prior: prior.cloned(),
+            start: base,
+            seed: None,
+            shadow: None,
+            hand_left: false,
             ctx,
             solver,
             ws,
@@ -496,14 +515,12 @@ impl OnlineCalibrator {
         &self.pose
     }
 
-    /// Whether the next frame is solved from [`OnlineCalibrator::pose`]; false at the start
-    /// and after `tracker.loss.window` failed frames in a row: the next frame then places the
-    /// hand as the Ch. 3 tracker's re-initialization does, with the current shape, unless a
-    /// caller places it first ([`OnlineCalibrator::set_pose`], e.g. from a Ch. 3 tracker that
-    /// goes on watching, as `hands track` does; it also does so after a frame without a
-    /// hand).
+    /// Whether the next frame is solved from [`OnlineCalibrator::pose`]; false at the start,
+    /// after a frame without a hand and after `tracker.loss.window` failed frames in a row:
+    /// the next frame then places the hand with the seed ([`crate::watch`]) unless a caller
+    /// places it first ([`OnlineCalibrator::set_pose`]).
     pub fn is_placed(&self) -> bool {
-        self.initialized
+        self.initialized && !self.hand_left
     }
 
     /// The template at the current β of the tracking model.
@@ -523,13 +540,23 @@ impl OnlineCalibrator {
     }
 
     /// Start the next frame from `pose` (e.g. the first frame's known pose, thesis §4.4.2);
-    /// clears the temporal history. An error for a pose of the wrong length.
+    /// clears the temporal history, and ends the seed's watch: the caller placed the hand. An
+    /// error for a pose of the wrong length.
     pub fn set_pose(&mut self, pose: &Pose) -> Result<(), OnlineError> {
-        self.pose = Pose::from_values(&self.problem.base.skeleton, pose.values.clone())?;
+        let pose = Pose::from_values(&self.problem.base.skeleton, pose.values.clone())?;
+        self.place(pose);
+        (self.seed, self.shadow) = (None, None);
+        Ok(())
+    }
+
+    /// Solve the next frame from `pose`, a new start: the frames before it are not this hand's
+    /// motion.
+    fn place(&mut self, pose: Pose) {
+        self.pose = pose;
         self.initialized = true;
+        self.hand_left = false;
         self.failed_run = 0;
         self.temporal.clear_history();
-        Ok(())
     }
 
     /// Start from the shape `beta` (all entries of the basis, mm) instead of the base template:
@@ -578,21 +605,63 @@ impl OnlineCalibrator {
         Ok(())
     }
 
-    /// Where the hand is placed when no caller placed it ([`OnlineCalibrator::set_pose`]): the
-    /// Ch. 3 tracker's re-initialization on `frame` with the current shape (its hypotheses,
-    /// the best fit kept), else (the tracker cannot be built or finds no hand there) the mean
-    /// pose on the points' centroid.
-    fn placed_pose(&self, frame: &PreprocessedFrame) -> Pose {
-        let config = self.config.tracker.clone();
-        if let Ok(mut tracker) =
-            hmodel_spheremesh::Tracker::new(self.template(), config, self.prior.as_ref())
-        {
-            let rec = tracker.track(frame, 0, 0.0);
-            if !rec.flags.iter().any(|f| f == "no_hand") {
-                return tracker.pose().clone();
+    /// Before solving a frame: an unplaced calibrator is placed by the seed (built on demand),
+    /// whose watch starts there; a seed still watching tracks the frame too, and a placement of
+    /// its own restarts the watch's count ([`crate::watch`]). Returns whether the calibrator
+    /// was placed here.
+    fn seed_frame(&mut self, frame: &PreprocessedFrame, index: u64, timestamp: f64) -> bool {
+        if !self.is_placed() {
+            self.shadow = None;
+            if self.seed.is_none() {
+                let config = self.config.tracker.clone();
+                self.seed =
+                    hmodel_spheremesh::Tracker::new(self.start, config, self.prior.as_ref()).ok();
             }
         }
-        self.centered_pose(&frame.points)
+        let Some(seed) = self.seed.as_mut() else {
+            return false;
+        };
+        let rec = seed.track(frame, index, timestamp);
+        let flagged = |name: &str| rec.flags.iter().any(|f| f == name);
+        if self.shadow.is_none() && !flagged("no_hand") && !flagged("solver_failed") {
+            let pose = seed.pose().clone();
+            self.place(pose);
+            self.shadow = Some(Shadow::default());
+            return true;
+        }
+        if let Some(shadow) = self.shadow.as_mut() {
+            // The seed placed the hand again (lost, or a better start at its second look): the
+            // watch counts from there.
+            if flagged("reinitialized") {
+                shadow.frames = 0;
+            }
+        }
+        false
+    }
+
+    /// After a frame: one frame of the seed's watch ([`crate::watch`]). Restarts the
+    /// calibrator from the seed's pose with the starting shape when it has fitted clearly
+    /// worse for long enough (true then), and lets the seed go once the watch is over.
+    fn watch(&mut self) -> bool {
+        let (Some(seed), Some(shadow)) = (self.seed.as_ref(), self.shadow.as_mut()) else {
+            return false;
+        };
+        let loss = self.config.tracker.loss.for_noise(self.noise.sigma());
+        let score = |ctx: &TrackingCtx<'_>| ctx.frame_stats(&loss).score();
+        if shadow.observe(score(&self.ctx.tracking), score(seed.context())) {
+            *shadow = Shadow::default();
+            let pose = seed.pose().clone();
+            let start = self.problem.basis.template_values();
+            if self.set_shape(&start).is_err() {
+                return false;
+            }
+            self.place(pose);
+            return true;
+        }
+        if shadow.is_over() {
+            (self.seed, self.shadow) = (None, None);
+        }
+        false
     }
 
     /// The mean pose moved so that the model's sphere centroid sits 10 mm behind the points'
@@ -664,6 +733,25 @@ impl OnlineCalibrator {
     /// a moved β), `laplace` (Eq. 4.5) and `filter` (the estimator and the certainties) —
     /// and `track` (the whole call).
     pub fn track(&mut self, frame: &PreprocessedFrame, index: u64, timestamp: f64) -> OnlineFrame {
+        let t = Instant::now();
+        let placed = self.seed_frame(frame, index, timestamp);
+        let seed_us = t.elapsed().as_secs_f64() * 1e6;
+        let mut out = self.solve(frame, index, timestamp);
+        if self.seed.is_some() {
+            out.record.timing_us.insert("seed".into(), seed_us);
+        }
+        if placed {
+            out.record.flags.insert(0, "reinitialized".into());
+        }
+        if self.watch() {
+            out.record.flags.push("shape_reset".into());
+        }
+        self.hand_left = out.record.flags.iter().any(|f| f == "no_hand");
+        out
+    }
+
+    /// [`Self::track`] but the seed: the frame solved from the pose where the calibrator is.
+    fn solve(&mut self, frame: &PreprocessedFrame, index: u64, timestamp: f64) -> OnlineFrame {
         let start = Instant::now();
         let mut rec = HandRecord::for_frame(index, timestamp);
         self.ctx.tracking.take_timing();
@@ -679,11 +767,11 @@ impl OnlineCalibrator {
         if finite_points.count() >= self.config.min_points.max(1) {
             self.ctx.tracking.set_frame(frame);
             self.update_noise(frame);
-            if !self.initialized {
-                self.pose = self.placed_pose(frame);
-                self.initialized = true;
-                // A placement, as `set_pose`: the frames before it are not this hand's motion.
-                self.temporal.clear_history();
+            if !self.is_placed() {
+                // No seed to place it.
+                let pose = self.centered_pose(&frame.points);
+                self.place(pose);
+                rec.flags.push("reinitialized".into());
             }
             self.set_prior();
             let t = Instant::now();

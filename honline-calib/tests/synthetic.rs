@@ -201,7 +201,6 @@ fn set_shape_starts_from_the_given_shape() {
     calib.set_shape(&start).unwrap();
     assert_eq!(calib.template(), &basis.apply(&base, &start).unwrap());
     let subset = error_subset(&basis);
-    calib.set_pose(&pose(&truth, 0, true)).unwrap();
     let frame =
         rendered_frame(&truth, &pose(&truth, 0, true), &Camera::sr300_qvga(), 1500).unwrap();
     // A frame without a hand keeps the estimate at the start; a rendered one moves it toward
@@ -209,6 +208,7 @@ fn set_shape_starts_from_the_given_shape() {
     let out = calib.track(&PreprocessedFrame::default(), 0, 0.0);
     assert!(!out.solved);
     assert_eq!(out.beta, start);
+    calib.set_pose(&pose(&truth, 0, true)).unwrap();
     let out = calib.track(&frame, 1, 0.0);
     assert!(out.solved);
     let (before, after) = (
@@ -303,10 +303,14 @@ fn lost_frames_leave_the_shape_and_ask_for_placement() {
     let mut off = pose(&truth, 0, true);
     let tx = base.skeleton.dof_index("global_tx").unwrap();
     off.values[tx] += 400.0;
-    calib.set_pose(&off).unwrap();
     let window = calib.config().tracker.loss.window;
     let frame = rendered_frame(&truth, &pose(&truth, 0, true), &camera, 1500).unwrap();
     let start = calib.track(&PreprocessedFrame::default(), 0, 0.0);
+    assert!(
+        !calib.is_placed(),
+        "a frame without a hand asks for a placement"
+    );
+    calib.set_pose(&off).unwrap();
     for k in 1..=window {
         assert!(calib.is_placed(), "frame {k}");
         let out = calib.track(&frame, k as u64, 0.0);

@@ -1,0 +1,128 @@
+//! The calibrator places the hand itself with a Ch. 3 tracker of the starting template, the
+//! seed, which then watches it for a while (`honline_calib::watch`): on a fist seen from a cold
+//! start, and on a hand that enters the view.
+
+use hand_model::kinematics::Pose;
+use hand_model::solver::PcaPrior;
+use hand_model::spheremesh::{default_right_hand, PosedSphereMesh, SphereMeshTemplate};
+use hmodel_spheremesh::synthetic::rendered_frame;
+use honline_calib::{OnlineCalibrator, OnlineConfig, OnlineFrame};
+use nalgebra::Vector3;
+use sensor_io::Camera;
+
+/// Mean keypoint error (mm) of a frame's record against `pose` of `t`.
+fn error(out: &OnlineFrame, t: &SphereMeshTemplate, pose: &Pose) -> f64 {
+    let expected = PosedSphereMesh::new(t, pose).keypoints(t);
+    out.record
+        .keypoints
+        .iter()
+        .zip(&expected)
+        .map(|(k, e)| (Vector3::from(*k) - e).norm())
+        .sum::<f64>()
+        / expected.len() as f64
+}
+
+fn has(out: &OnlineFrame, flag: &str) -> bool {
+    out.record.flags.iter().any(|f| f == flag)
+}
+
+/// A fist seen from a cold start: the seed places it as the open mean pose and converges
+/// within a few frames; the calibrator, placed there too, bends its uncertain shape to the
+/// wrong pose and holds it, until the watch restarts it from the seed. Measured after 45
+/// frames: 0.76 mm mean keypoint error with one restart, 28.55 mm without the watch.
+#[test]
+fn a_fist_from_a_cold_start_is_not_calibrated_to_the_wrong_pose() {
+    let t = default_right_hand();
+    let prior = PcaPrior::project_default();
+    let fist = Pose::from_named(
+        &t.skeleton,
+        [
+            ("global_ry", -0.35),
+            ("global_rz", 2.96),
+            ("global_tx", -9.8),
+            ("global_ty", 42.0),
+            ("global_tz", 402.0),
+            ("index_mcp_flex", 1.15),
+            ("index_pip_flex", 1.32),
+            ("index_dip_flex", 0.82),
+            ("middle_mcp_flex", 1.08),
+            ("middle_pip_flex", 1.24),
+            ("middle_dip_flex", 0.75),
+            ("ring_mcp_flex", 1.21),
+            ("ring_pip_flex", 1.34),
+            ("ring_dip_flex", 0.81),
+            ("pinky_mcp_flex", 1.32),
+            ("pinky_pip_flex", 1.41),
+            ("pinky_dip_flex", 0.83),
+            ("thumb_cmc_abd", 0.15),
+            ("thumb_cmc_flex", 0.8),
+            ("thumb_mcp_flex", 0.59),
+            ("thumb_ip_flex", 0.34),
+        ],
+    )
+    .unwrap();
+    let frame = rendered_frame(&t, &fist, &Camera::sr300_qvga(), 2500).unwrap();
+    let mut calib = OnlineCalibrator::new(&t, OnlineConfig::default(), Some(&prior)).unwrap();
+    let mut seed = hmodel_spheremesh::Tracker::new(&t, Default::default(), Some(&prior)).unwrap();
+    let (mut resets, mut last, mut seed_last) = (0, 0.0, 0.0);
+    for f in 0..45 {
+        let out = calib.track(&frame, f, f as f64 / 30.0);
+        assert_eq!(has(&out, "reinitialized"), f == 0, "frame {f}");
+        resets += usize::from(has(&out, "shape_reset"));
+        last = error(&out, &t, &fist);
+        let rec = seed.track(&frame, f, f as f64 / 30.0);
+        let expected = PosedSphereMesh::new(&t, &fist).keypoints(&t);
+        seed_last = rec
+            .keypoints
+            .iter()
+            .zip(&expected)
+            .map(|(k, e)| (Vector3::from(*k) - e).norm())
+            .sum::<f64>()
+            / 21.0;
+    }
+    println!(
+        "fist from a cold start, 45 frames: online {last:.2} mm ({resets} reset), the Ch. 3 tracker {seed_last:.2} mm"
+    );
+    assert!(
+        resets >= 1 && last < seed_last + 2.0,
+        "{last} mm, {resets} resets"
+    );
+}
+
+/// The hand slides up into the view from below the image over 8 frames and then holds still.
+/// The first placement is made on the fingers; the calibrator, bending its shape to it, would
+/// hold the wrong pose. A caller's pose ([`OnlineCalibrator::set_pose`]) ends the watch.
+#[test]
+fn a_hand_entering_the_view_is_found() {
+    let t = default_right_hand();
+    let prior = PcaPrior::project_default();
+    let camera = Camera::sr300_qvga();
+    let ty = t.skeleton.dof_index("global_ty").unwrap();
+    let truth = |k: usize| {
+        let mut p =
+            Pose::from_named(&t.skeleton, [("global_tz", 400.0), ("global_ty", 30.0)]).unwrap();
+        p.values[ty] += 120.0 * 8usize.saturating_sub(k) as f64 / 8.0;
+        p
+    };
+    let mut calib = OnlineCalibrator::new(&t, OnlineConfig::default(), Some(&prior)).unwrap();
+    let mut errors = Vec::new();
+    for k in 0..40usize {
+        let frame = rendered_frame(&t, &truth(k), &camera, 1500).unwrap();
+        let out = calib.track(&frame, k as u64, 0.0);
+        errors.push(error(&out, calib.template(), &truth(k)));
+    }
+    let first = errors[0];
+    let end = errors.last().copied().unwrap();
+    println!("a hand entering the view: first frame {first:.2} mm, last {end:.2} mm");
+    assert!(first > 20.0, "the first placement sees only the fingers");
+    assert!(end < 2.0, "found: {end:.2} mm");
+
+    let mut calib = OnlineCalibrator::new(&t, OnlineConfig::default(), Some(&prior)).unwrap();
+    let frame = rendered_frame(&t, &truth(8), &camera, 1500).unwrap();
+    let seeded = |out: &OnlineFrame| out.record.timing_us.contains_key("seed");
+    assert!(seeded(&calib.track(&frame, 0, 0.0)));
+    assert!(seeded(&calib.track(&frame, 1, 0.0)), "the seed watches");
+    calib.set_pose(&truth(8)).unwrap();
+    let out = calib.track(&frame, 2, 0.0);
+    assert!(!seeded(&out) && out.record.flags.is_empty());
+}
