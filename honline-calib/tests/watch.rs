@@ -8,13 +8,13 @@ use hand_model::spheremesh::{default_right_hand, PosedSphereMesh, SphereMeshTemp
 use hmodel_spheremesh::synthetic::rendered_frame;
 use honline_calib::{OnlineCalibrator, OnlineConfig, OnlineFrame};
 use nalgebra::Vector3;
+use sensor_io::record::HandRecord;
 use sensor_io::Camera;
 
-/// Mean keypoint error (mm) of a frame's record against `pose` of `t`.
-fn error(out: &OnlineFrame, t: &SphereMeshTemplate, pose: &Pose) -> f64 {
+/// Mean keypoint error (mm) of a record against `pose` of `t`.
+fn error(rec: &HandRecord, t: &SphereMeshTemplate, pose: &Pose) -> f64 {
     let expected = PosedSphereMesh::new(t, pose).keypoints(t);
-    out.record
-        .keypoints
+    rec.keypoints
         .iter()
         .zip(&expected)
         .map(|(k, e)| (Vector3::from(*k) - e).norm())
@@ -69,16 +69,8 @@ fn a_fist_from_a_cold_start_is_not_calibrated_to_the_wrong_pose() {
         let out = calib.track(&frame, f, f as f64 / 30.0);
         assert_eq!(has(&out, "reinitialized"), f == 0, "frame {f}");
         resets += usize::from(has(&out, "shape_reset"));
-        last = error(&out, &t, &fist);
-        let rec = seed.track(&frame, f, f as f64 / 30.0);
-        let expected = PosedSphereMesh::new(&t, &fist).keypoints(&t);
-        seed_last = rec
-            .keypoints
-            .iter()
-            .zip(&expected)
-            .map(|(k, e)| (Vector3::from(*k) - e).norm())
-            .sum::<f64>()
-            / 21.0;
+        last = error(&out.record, &t, &fist);
+        seed_last = error(&seed.track(&frame, f, f as f64 / 30.0), &t, &fist);
     }
     println!(
         "fist from a cold start, 45 frames: online {last:.2} mm ({resets} reset), the Ch. 3 tracker {seed_last:.2} mm"
@@ -109,7 +101,7 @@ fn a_hand_entering_the_view_is_found() {
     for k in 0..40usize {
         let frame = rendered_frame(&t, &truth(k), &camera, 1500).unwrap();
         let out = calib.track(&frame, k as u64, 0.0);
-        errors.push(error(&out, calib.template(), &truth(k)));
+        errors.push(error(&out.record, calib.template(), &truth(k)));
     }
     let first = errors[0];
     let end = errors.last().copied().unwrap();
