@@ -608,8 +608,14 @@ impl<'m> OnlineCalibrator<'m> {
     /// Before solving a frame: an unplaced calibrator is placed by the seed (built on demand),
     /// whose watch starts there; a seed still watching tracks the frame too, and a placement of
     /// its own restarts the watch's count ([`crate::watch`]). Returns whether the calibrator
-    /// was placed here.
-    fn seed_frame(&mut self, frame: &PreprocessedFrame, index: u64, timestamp: f64) -> bool {
+    /// was placed here, and the seed's record when the watch is still settling: the calibrator
+    /// is then placed at the seed's pose and does not solve the frame.
+    fn seed_frame(
+        &mut self,
+        frame: &PreprocessedFrame,
+        index: u64,
+        timestamp: f64,
+    ) -> (bool, Option<HandRecord>) {
         if !self.is_placed() {
             self.shadow = None;
             if self.seed.is_none() {
@@ -619,24 +625,27 @@ impl<'m> OnlineCalibrator<'m> {
             }
         }
         let Some(seed) = self.seed.as_mut() else {
-            return false;
+            return (false, None);
         };
         let rec = seed.track(frame, index, timestamp);
         let flagged = |name: &str| rec.flags.iter().any(|f| f == name);
-        if self.shadow.is_none() && !flagged("no_hand") && !flagged("solver_failed") {
-            let pose = seed.pose().clone();
-            self.place(pose);
+        let hand = !flagged("no_hand") && !flagged("solver_failed");
+        let placed = self.shadow.is_none() && hand;
+        if placed {
             self.shadow = Some(Shadow::default());
-            return true;
-        }
-        if let Some(shadow) = self.shadow.as_mut() {
+        } else if let Some(shadow) = self.shadow.as_mut() {
             // The seed placed the hand again (lost, or a better start at its second look): the
             // watch counts from there.
             if flagged("reinitialized") {
                 shadow.frames = 0;
             }
         }
-        false
+        let settling = hand && self.shadow.is_some_and(|s| s.is_settling());
+        if placed || settling {
+            let pose = seed.pose().clone();
+            self.place(pose);
+        }
+        (placed, settling.then_some(rec))
     }
 
     /// After a frame: one frame of the seed's watch ([`crate::watch`]). Restarts the
@@ -648,6 +657,10 @@ impl<'m> OnlineCalibrator<'m> {
         };
         let loss = self.config.tracker.loss.for_noise(self.noise.sigma());
         let score = |ctx: &TrackingCtx<'_>| ctx.frame_stats(&loss).score();
+        if shadow.is_settling() {
+            shadow.frames += 1;
+            return false;
+        }
         if shadow.observe(score(&self.ctx.tracking), score(seed.context())) {
             *shadow = Shadow::default();
             let pose = seed.pose().clone();
@@ -733,15 +746,18 @@ impl<'m> OnlineCalibrator<'m> {
     /// a moved β), `laplace` (Eq. 4.5) and `filter` (the estimator and the certainties) —
     /// and `track` (the whole call).
     pub fn track(&mut self, frame: &PreprocessedFrame, index: u64, timestamp: f64) -> OnlineFrame {
-        let t = Instant::now();
-        let placed = self.seed_frame(frame, index, timestamp);
-        let seed_us = t.elapsed().as_secs_f64() * 1e6;
-        let mut out = self.solve(frame, index, timestamp);
-        if self.seed.is_some() {
-            out.record.timing_us.insert("seed".into(), seed_us);
-        }
-        if placed {
+        let start = Instant::now();
+        let (placed, settling) = self.seed_frame(frame, index, timestamp);
+        let seed_us = start.elapsed().as_secs_f64() * 1e6;
+        let watched = self.seed.is_some();
+        let mut out = self.solve(frame, index, timestamp, settling);
+        if placed && !out.record.flags.iter().any(|f| f == "reinitialized") {
             out.record.flags.insert(0, "reinitialized".into());
+        }
+        if watched {
+            let timing = &mut out.record.timing_us;
+            timing.insert("seed".into(), seed_us);
+            timing.insert("track".into(), start.elapsed().as_secs_f64() * 1e6);
         }
         if self.watch() {
             out.record.flags.push("shape_reset".into());
@@ -750,8 +766,16 @@ impl<'m> OnlineCalibrator<'m> {
         out
     }
 
-    /// [`Self::track`] but the seed: the frame solved from the pose where the calibrator is.
-    fn solve(&mut self, frame: &PreprocessedFrame, index: u64, timestamp: f64) -> OnlineFrame {
+    /// [`Self::track`] but the seed: the frame solved from the pose where the calibrator is, or,
+    /// while the seed's watch is settling, the seed's record of it (`settling`) with the
+    /// estimate kept.
+    fn solve(
+        &mut self,
+        frame: &PreprocessedFrame,
+        index: u64,
+        timestamp: f64,
+        settling: Option<HandRecord>,
+    ) -> OnlineFrame {
         let start = Instant::now();
         let mut rec = HandRecord::for_frame(index, timestamp);
         self.ctx.tracking.take_timing();
@@ -764,7 +788,14 @@ impl<'m> OnlineCalibrator<'m> {
             .filter(|p| p.iter().all(|v| v.is_finite()));
         let mut reshape_us = 0.0;
         let mut stats = None;
-        if finite_points.count() >= self.config.min_points.max(1) {
+        if let Some(seed) = settling {
+            // The seed's frame: its flags, energies and stages, the calibrator's shape.
+            rec.flags = seed.flags;
+            rec.flags.push("settling".into());
+            rec.energies = seed.energies;
+            rec.iterations = seed.iterations;
+            rec.timing_us = seed.timing_us;
+        } else if finite_points.count() >= self.config.min_points.max(1) {
             self.ctx.tracking.set_frame(frame);
             self.update_noise(frame);
             if !self.is_placed() {

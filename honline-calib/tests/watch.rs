@@ -6,6 +6,7 @@ use hand_model::kinematics::Pose;
 use hand_model::solver::PcaPrior;
 use hand_model::spheremesh::{default_right_hand, PosedSphereMesh, SphereMeshTemplate};
 use hmodel_spheremesh::synthetic::rendered_frame;
+use honline_calib::watch::SETTLE_FRAMES;
 use honline_calib::{OnlineCalibrator, OnlineConfig, OnlineFrame};
 use nalgebra::Vector3;
 use sensor_io::record::HandRecord;
@@ -27,9 +28,11 @@ fn has(out: &OnlineFrame, flag: &str) -> bool {
 }
 
 /// A fist seen from a cold start: the seed places it as the open mean pose and converges
-/// within a few frames; the calibrator, placed there too, bends its uncertain shape to the
-/// wrong pose and holds it, until the watch restarts it from the seed. Measured after 45
-/// frames: 0.76 mm mean keypoint error with one restart, 28.55 mm without the watch.
+/// within a few frames. The calibrator follows it for [`SETTLE_FRAMES`] frames (flag
+/// `settling`) and only then solves and learns. Measured after 45 frames: 0.80 mm mean keypoint
+/// error (the seed alone 0.00 mm); placed there too and solving from the first frame it bent
+/// its uncertain shape to the wrong pose and held it: 0.76 mm after one restart by the watch,
+/// 28.55 mm without the watch.
 #[test]
 fn a_fist_from_a_cold_start_is_not_calibrated_to_the_wrong_pose() {
     let t = default_right_hand();
@@ -68,6 +71,8 @@ fn a_fist_from_a_cold_start_is_not_calibrated_to_the_wrong_pose() {
     for f in 0..45 {
         let out = calib.track(&frame, f, f as f64 / 30.0);
         assert_eq!(has(&out, "reinitialized"), f == 0, "frame {f}");
+        assert_eq!(has(&out, "settling"), f < SETTLE_FRAMES as u64, "frame {f}");
+        assert_eq!(out.solved, f >= SETTLE_FRAMES as u64, "frame {f}");
         resets += usize::from(has(&out, "shape_reset"));
         last = error(&out.record, &t, &fist);
         seed_last = error(&seed.track(&frame, f, f as f64 / 30.0), &t, &fist);
@@ -75,10 +80,7 @@ fn a_fist_from_a_cold_start_is_not_calibrated_to_the_wrong_pose() {
     println!(
         "fist from a cold start, 45 frames: online {last:.2} mm ({resets} reset), the Ch. 3 tracker {seed_last:.2} mm"
     );
-    assert!(
-        resets >= 1 && last < seed_last + 2.0,
-        "{last} mm, {resets} resets"
-    );
+    assert!(last < seed_last + 2.0, "{last} mm, {resets} resets");
 }
 
 /// The hand slides up into the view from below the image over 8 frames and then holds still.
