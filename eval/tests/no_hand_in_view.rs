@@ -20,7 +20,7 @@
 //! found the returning hand under ToF (last 30 frames 1.32 mm) but not noise-free (40.45 mm):
 //! it had no second look at its placements. Since session 29 it is placed and watched by a
 //! Ch. 3 tracker of its starting template (`honline_calib::watch`, before only in `hands
-//! track`), and must find the hand again too: last 30 frames 0.28 mm noise-free, 1.40 mm
+//! track`), and must find the hand again too: last 30 frames 0.27 mm noise-free, 1.38 mm
 //! under ToF.
 
 use eval::synthetic::{SyntheticRun, SyntheticSequence, SyntheticSpec};

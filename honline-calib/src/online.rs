@@ -631,13 +631,16 @@ impl<'m> OnlineCalibrator<'m> {
         let flagged = |name: &str| rec.flags.iter().any(|f| f == name);
         let hand = !flagged("no_hand") && !flagged("solver_failed");
         let placed = self.shadow.is_none() && hand;
+        // Only a shape that has learned nothing yet settles: one learned from earlier frames
+        // (a hand that comes back, a lost run) may track better than the seed's template.
+        let settle = self.measurements == 0;
         if placed {
-            self.shadow = Some(Shadow::default());
+            self.shadow = Some(Shadow::new(settle));
         } else if let Some(shadow) = self.shadow.as_mut() {
             // The seed placed the hand again (lost, or a better start at its second look): the
             // watch counts from there.
             if flagged("reinitialized") {
-                shadow.frames = 0;
+                *shadow = Shadow::new(settle);
             }
         }
         let settling = hand && self.shadow.is_some_and(|s| s.is_settling());
@@ -662,7 +665,7 @@ impl<'m> OnlineCalibrator<'m> {
             return false;
         }
         if shadow.observe(score(&self.ctx.tracking), score(seed.context())) {
-            *shadow = Shadow::default();
+            *shadow = Shadow::new(false);
             let pose = seed.pose().clone();
             let start = self.problem.basis.template_values();
             if self.set_shape(&start).is_err() {

@@ -12,10 +12,11 @@
 //! frame, online calibration 16.57 mm mean keypoint error, the seed alone 2.01 mm.
 //!
 //! Two phases follow each placement (and restart at each of the seed's own re-initializations):
-//! - **Settling**, [`SETTLE_FRAMES`] frames (session 29): the calibrator follows the seed — its
-//!   pose is the seed's, it solves nothing and learns nothing, the record is the seed's with
-//!   the calibrator's shape (flag `settling`). A shape learned while the seed is still
-//!   converging is learned from the wrong pose.
+//! - **Settling**, [`SETTLE_FRAMES`] frames (session 29), while the shape has learned nothing
+//!   yet (the first placement, or the first after a restart with the starting shape): the
+//!   calibrator follows the seed — its pose is the seed's, it solves nothing and learns
+//!   nothing, the record is the seed's with the calibrator's shape (flag `settling`). A shape
+//!   learned while the seed is still converging is learned from the wrong pose.
 //! - **Watch**, [`SHADOW_FRAMES`] frames: the calibrator solves and learns from where the seed
 //!   is, and the seed goes on tracking beside it; when the calibrator fits clearly worse than
 //!   the seed ([`hand_model::solver::FrameStats::score`] above [`SHADOW_RATIO`] times the
@@ -26,17 +27,25 @@
 //!
 //! The settling, measured on the 74 ToF cold-start cuts (the library's motions of the default
 //! hand and random subjects tracked from frame 45–250 on; mean keypoint error over each cut,
-//! summed): online calibration 351.77 → 250.80 mm, where the Ch. 3 tracker alone gets 236.49
+//! summed): online calibration 351.77 → 253.86 mm, where the Ch. 3 tracker alone gets 236.49
 //! (`rotating_fist` from frame 165 42.77 → 16.82 mm, a random subject's `random` from 250
 //! 23.68 → 5.32, `fist` from 105 17.99 → 7.79, `crossing` from 150 28.22 → 17.35; worse:
-//! `occlusion` from 60 2.68 → 5.67 and from 45 2.26 → 3.47, a random subject's `crossing` from
-//! 250 2.74 → 3.72, its `teaser` 1.83 → 2.38: there the shape now starts learning during the
-//! harder motion). Measured with 10 settling frames: 264.80; with 60: 225.87, most of that
+//! `occlusion` from 60 2.68 → 5.67 and from 45 2.26 → 3.47, `crossing` from 105 3.79 → 5.12, a
+//! random subject's `crossing` from 250 2.74 → 3.72, its `teaser` 1.83 → 2.38: there the shape
+//! now starts learning during the harder motion). Measured with 10 settling frames: 264.80;
+//! with 60: 225.87, most of that
 //! gain from short cuts tracked by the seed alone, at the cost of learning later (a random
 //! subject's `teaser` from 250 2.92, its `random` from 100 2.34 → 2.90). On the library's 34 sequences from their first frame
 //! (the default hand, which *is* the template, so that learning can only cost) the sum went
-//! 249.23 → 253.34 mm, the most on the noise-free `rotating_fist` (0.89 → 1.84 mm): its shape
+//! 249.23 → 253.18 mm, the most on the noise-free `rotating_fist` (0.89 → 1.84 mm): its shape
 //! now starts learning during the rotation.
+//!
+//! Settling at every placement instead (those after frames without a hand or a lost run too)
+//! held the calibrator behind a seed whose starting template fits the hand worse than the shape
+//! learned so far: on the 30 Hz `leave_reenter` of a random subject (seed 8), the seed placed
+//! the returning hand 10–24 mm off and held it for the 30 frames; mean keypoint error over the
+//! frames with the hand wholly in view, noise-free, 5.45 mm without settling, 23.70 with it at
+//! every placement, 6.14 at the first only (ToF: 6.83, 7.29, 6.44 mm).
 //!
 //! The watch, before the settling existed (session 25):
 //! Measured on 28 ToF cold starts (library motions of the default hand and random subjects,
@@ -58,8 +67,8 @@
 //! Until session 29 the seed and its watch lived in the `hands` CLI, and the calibrator used
 //! alone placed itself with the Ch. 3 tracker's re-initialization at its current shape,
 //! without a watch. On the same `leave_reenter` seen by the calibrator alone (360 frames, from
-//! the true template), mean keypoint error over the last 30 frames: noise-free 40.45 → 0.28
-//! mm, ToF 1.32 → 1.40 mm.
+//! the true template), mean keypoint error over the last 30 frames: noise-free 40.45 → 0.27
+//! mm, ToF 1.32 → 1.38 mm.
 
 /// Frames after a placement during which the calibrator follows the seed without solving
 /// (module docs).
@@ -87,9 +96,19 @@ pub(crate) struct Shadow {
     pub(crate) frames: usize,
     /// Consecutive frames in which the calibrator fitted clearly worse.
     worse: usize,
+    /// Frames of settling at the start of the watch: [`SETTLE_FRAMES`] or none.
+    settle: usize,
 }
 
 impl Shadow {
+    /// A watch from a placement, beginning with [`SETTLE_FRAMES`] of settling when `settle`.
+    pub(crate) fn new(settle: bool) -> Self {
+        Self {
+            settle: if settle { SETTLE_FRAMES } else { 0 },
+            ..Self::default()
+        }
+    }
+
     /// Count one frame with the calibrator's and the seed's scores; true when the calibrator
     /// is to restart from the seed.
     pub(crate) fn observe(&mut self, calibrator: f64, seed: f64) -> bool {
@@ -99,14 +118,14 @@ impl Shadow {
         self.worse >= SHADOW_RUN
     }
 
-    /// Whether the calibrator still follows the seed without solving ([`SETTLE_FRAMES`]).
+    /// Whether the calibrator still follows the seed without solving.
     pub(crate) fn is_settling(&self) -> bool {
-        self.frames < SETTLE_FRAMES
+        self.frames < self.settle
     }
 
     /// Whether the watch is over.
     pub(crate) fn is_over(&self) -> bool {
-        self.frames >= SETTLE_FRAMES + SHADOW_FRAMES
+        self.frames >= self.settle + SHADOW_FRAMES
     }
 }
 
