@@ -424,6 +424,15 @@ pub fn run(args: BenchArgs) -> Result<()> {
         "--frames must be in 1..=100000, got {}",
         args.frames
     );
+    // The online calibrator's first frames are its seed's (`honline_calib::watch`), left out
+    // of its stages.
+    let settle = honline_calib::watch::SETTLE_FRAMES;
+    ensure!(
+        !models.contains(&Model::Online) || args.frames > settle,
+        "--frames must be above {settle} for the online calibrator, whose first {settle} frames \
+         follow the Ch. 3 tracker that placed the hand; got {}",
+        args.frames
+    );
     ensure!(
         (1..=100_000).contains(&args.points),
         "--points must be in 1..=100000, got {}",

@@ -719,7 +719,7 @@ fn bench_writes_positive_medians_as_json() {
     let (ok, text) = hands(&[
         "bench",
         "--frames",
-        "10",
+        "36",
         "--json",
         json.to_str().expect("utf8"),
     ]);
@@ -787,7 +787,22 @@ fn bench_rejects_bad_arguments_clearly() {
     for (args, needle) in [
         (vec!["bench", "--model", "voxels"], "voxels"),
         (vec!["bench", "--frames", "0"], "--frames"),
-        (vec!["bench", "--noise", "laser", "--frames", "2"], "laser"),
+        (
+            vec![
+                "bench",
+                "--model",
+                "spheremesh",
+                "--noise",
+                "laser",
+                "--frames",
+                "2",
+            ],
+            "laser",
+        ),
+        (
+            vec!["bench", "--model", "online", "--frames", "30"],
+            "above 30",
+        ),
         (
             vec!["bench", "--json", "/no/such/dir/b.json"],
             "/no/such/dir",
