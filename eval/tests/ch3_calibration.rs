@@ -10,8 +10,8 @@
 //! since session 19): centers 0.24–0.88 mm and radii 0.04–0.10 mm on the five subjects.
 //! Tracking the noise-free teaser with the calibrated template: 0.205 / 0.228 / 0.243 / 0.222
 //! / 0.236 mm mean keypoint error against 0.168 / 0.251 / 0.351 / 0.184 / 0.247 mm with the
-//! true template (ratios 1.22 / 0.91 / 0.69 / 1.21 / 0.95, re-measured in session 29; 1.27 on
-//! subject 1 before session 28's second look at placements; with β and rest rotations alone
+//! true template (ratios 1.22 / 0.91 / 0.69 / 1.21 / 0.95, re-measured in session 29; subject 1
+//! was 0.208 against 0.165 mm, 1.27, when this was first written; with β and rest rotations alone
 //! 1.26 / 0.89 / 0.69 / 1.20 / 0.92, see `CalibrationConfig::free_spheres` for why the free
 //! offsets are the default) and 2.5–8.8 mm with the default one — "within 10 %" holds on
 //! subjects 2, 3 and 5, not on 1 and 4.
