@@ -213,13 +213,13 @@
 //!   places the hand itself ([`watch`]). At the first frame, after a frame without a hand and
 //!   after a lost run, a Ch. 3 tracker of the starting template (the *seed*) places it with its
 //!   re-initialization hypotheses. After the first placement the calibrator follows that
-//!   tracker without learning for 30 frames (flag `settling`, session 29), then solves beside it for 30 more and is
-//!   restarted from its pose with the starting shape should it fit clearly worse (flag
-//!   `shape_reset`, session 25, in `hands track` until session 29): started on a fist, the
-//!   calibrator otherwise bent its still uncertain shape to the open mean pose it was placed
-//!   in and kept it (ToF `fist` from its 60th frame: 16.57 → 2.80 mm with the restart; 74 ToF
-//!   cold starts summed 351.77 → 253.86 mm with the settling). [`OnlineCalibrator::set_pose`]
-//!   places it instead and ends the watch.
+//!   tracker without learning for 30 frames (flag `settling`, session 29), then solves beside
+//!   it for 30 more and is restarted from its pose with the starting shape should it fit
+//!   clearly worse (flag `shape_reset`, session 25, in `hands track` until session 29):
+//!   started on a fist, the calibrator otherwise bent its still uncertain shape to the open
+//!   mean pose it was placed in and kept it (ToF `fist` from its 60th frame: 16.57 → 2.80 mm
+//!   with the restart; 74 ToF cold starts summed 351.77 → 253.86 mm with the settling).
+//!   [`OnlineCalibrator::set_pose`] places it instead and ends the watch.
 //! - The collision term (Ch. 3) tolerates the overlap the model's pills have at the rest pose;
 //!   that overlap belongs to the shape, so the term is rebuilt on the current β whenever β
 //!   moved. Kept at the starting template's, it counted a thicker-fingered estimate's own rest

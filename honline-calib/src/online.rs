@@ -643,7 +643,8 @@ impl<'m> OnlineCalibrator<'m> {
                 *shadow = Shadow::new(settle);
             }
         }
-        let settling = hand && self.shadow.is_some_and(|s| s.is_settling());
+        // A frame the seed failed to solve keeps its previous pose, which the calibrator follows.
+        let settling = !flagged("no_hand") && self.shadow.is_some_and(|s| s.is_settling());
         if placed || settling {
             let pose = seed.pose().clone();
             self.place(pose);
@@ -740,14 +741,17 @@ impl<'m> OnlineCalibrator<'m> {
     /// Track one frame and update the shape estimate (crate docs). Never returns a non-finite
     /// value or an invalid shape: a frame that cannot be solved keeps the previous pose and
     /// estimate and is flagged (`solver_failed`); a frame without a hand (`no_hand`) reports
-    /// the pose of the last frame solved without being flagged `lost`.
+    /// the pose of the last frame solved without being flagged `lost`. A frame where the seed
+    /// placed the hand is flagged `reinitialized`; the first frames after the first placement
+    /// are the seed's (`settling`, [`crate::watch`]), not solved (`solved` false).
     ///
     /// The record's `timing_us` splits the frame (µs) so that it compares stage by stage with
     /// the plain tracker's ([`hmodel_spheremesh::Tracker::track`]): `correspondences` (the
     /// context refreshes of the LM), `solve` (the rest of the LM: terms, factorization),
     /// and what calibrating adds — `reshape` (the template and the collision term rebuilt on
     /// a moved β), `laplace` (Eq. 4.5) and `filter` (the estimator and the certainties) —
-    /// and `track` (the whole call).
+    /// `seed` (the seed's frame, while it watches) and `track` (the whole call). A settling
+    /// frame carries the seed's stages.
     pub fn track(&mut self, frame: &PreprocessedFrame, index: u64, timestamp: f64) -> OnlineFrame {
         let start = Instant::now();
         let (placed, settling) = self.seed_frame(frame, index, timestamp);

@@ -4,11 +4,11 @@
 //! The calibrator is placed by a Ch. 3 tracker of the starting template, the *seed*: at the
 //! first frame, after a frame without a hand and after a run of lost frames, the seed's
 //! re-initialization hypotheses (and [`hand_model::solver::RECHECK_FRAMES`] frames later its
-//! second look at them) give the calibrator's pose. The first frames of the calibrator are
-//! solved from that placement, which may be wrong (a fist placed as the open mean pose, a hand
-//! placed on the first fingers entering the view), and its shape, uncertain at the start,
-//! bends to fit the wrong pose and then holds it. The seed's fixed template cannot bend, so the
-//! seed converges where the calibrator does not: the ToF `fist` sequence started at its 60th
+//! second look at them) give the calibrator's pose. That placement may be wrong (a fist placed
+//! as the open mean pose, a hand placed on the first fingers entering the view); solved from
+//! it, the calibrator's shape, uncertain at the start, bends to fit the wrong pose and then
+//! holds it. The seed's fixed template cannot bend, so the seed converges where the calibrator
+//! does not: the ToF `fist` sequence started at its 60th
 //! frame, online calibration 16.57 mm mean keypoint error, the seed alone 2.01 mm.
 //!
 //! Two phases follow each placement (and restart at each of the seed's own re-initializations):
@@ -32,13 +32,13 @@
 //! 23.68 → 5.32, `fist` from 105 17.99 → 7.79, `crossing` from 150 28.22 → 17.35; worse:
 //! `occlusion` from 60 2.68 → 5.67 and from 45 2.26 → 3.47, `crossing` from 105 3.79 → 5.12, a
 //! random subject's `crossing` from 250 2.74 → 3.72, its `teaser` 1.83 → 2.38: there the shape
-//! now starts learning during the harder motion). Measured with 10 settling frames: 264.80;
-//! with 60: 225.87, most of that
-//! gain from short cuts tracked by the seed alone, at the cost of learning later (a random
-//! subject's `teaser` from 250 2.92, its `random` from 100 2.34 → 2.90). On the library's 34 sequences from their first frame
-//! (the default hand, which *is* the template, so that learning can only cost) the sum went
-//! 249.23 → 253.18 mm, the most on the noise-free `rotating_fist` (0.89 → 1.84 mm): its shape
-//! now starts learning during the rotation.
+//! now starts learning during the harder motion). With settling at every placement (below),
+//! 10 settling frames gave 264.80, 30 gave 250.80 and 60 gave 225.87, most of that last gain
+//! from short cuts tracked by the seed alone, at the cost of learning later (a random
+//! subject's `teaser` from 250 2.92, its `random` from 100 2.34 → 2.90). On the library's 34
+//! sequences from their first frame (the default hand, which *is* the template, so that
+//! learning can only cost) the sum went 249.23 → 253.18 mm, the most on the noise-free
+//! `rotating_fist` (0.89 → 1.84 mm): its shape now starts learning during the rotation.
 //!
 //! Settling at every placement instead (those after frames without a hand or a lost run too)
 //! held the calibrator behind a seed whose starting template fits the hand worse than the shape
@@ -47,9 +47,9 @@
 //! frames with the hand wholly in view, noise-free, 5.45 mm without settling, 23.70 with it at
 //! every placement, 6.14 at the first only (ToF: 6.83, 7.29, 6.44 mm).
 //!
-//! The watch, before the settling existed (session 25):
-//! Measured on 28 ToF cold starts (library motions of the default hand and random subjects,
-//! tracked from frame 45–250 on): the watch restarted the calibrator on 9 of them, mean
+//! The watch, before the settling existed (session 25), measured on 28 ToF cold starts
+//! (library motions of the default hand and random subjects, tracked from frame 45–250 on):
+//! the watch restarted the calibrator on 9 of them, mean
 //! keypoint error without → with it: `rotating_fist` from frame 60 17.19 → 3.80 mm, from 150
 //! 25.39 → 7.69, from 45 4.59 → 2.49; `rotation_fast` from 165 74.11 → 21.28, from 60 1.69 →
 //! 1.76 (the one loss); a random subject's calibration motion from 250 28.72 → 6.04, its
