@@ -373,9 +373,6 @@ pub struct OnlineCalibrator<'m> {
     seed: Option<hmodel_spheremesh::Tracker<'m>>,
     /// `Some` while the seed, having placed the hand, tracks beside the calibrator.
     shadow: Option<Shadow>,
-    /// Whether the last frame had no hand: the next is placed again, not solved from the pose
-    /// the hand left at.
-    hand_left: bool,
 }
 
 impl<'m> OnlineCalibrator<'m> {
@@ -426,7 +423,6 @@ impl<'m> OnlineCalibrator<'m> {
             start: base,
             seed: None,
             shadow: None,
-            hand_left: false,
             ctx,
             solver,
             ws,
@@ -520,7 +516,7 @@ impl<'m> OnlineCalibrator<'m> {
     /// the next frame then places the hand with the seed ([`crate::watch`]) unless a caller
     /// places it first ([`OnlineCalibrator::set_pose`]).
     pub fn is_placed(&self) -> bool {
-        self.initialized && !self.hand_left
+        self.initialized
     }
 
     /// The template at the current β of the tracking model.
@@ -554,7 +550,6 @@ impl<'m> OnlineCalibrator<'m> {
     fn place(&mut self, pose: Pose) {
         self.pose = pose;
         self.initialized = true;
-        self.hand_left = false;
         self.failed_run = 0;
         self.temporal.clear_history();
     }
@@ -769,7 +764,11 @@ impl<'m> OnlineCalibrator<'m> {
         if self.watch() {
             out.record.flags.push("shape_reset".into());
         }
-        self.hand_left = out.record.flags.iter().any(|f| f == "no_hand");
+        // As the trackers' frame loop: a hand that comes back is placed again, not solved from
+        // the pose it left at.
+        if out.record.flags.iter().any(|f| f == "no_hand") {
+            self.initialized = false;
+        }
         out
     }
 
