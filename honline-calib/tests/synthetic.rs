@@ -239,19 +239,21 @@ fn absurd_settings_are_refused_with_their_name() {
     assert!(OnlineCalibrator::new(&base, OnlineConfig::default(), None).is_ok());
 }
 
-/// The innovation gate (`OnlineConfig::innovation_gate`): after a settled start, a frame
-/// whose fingers jumped ahead of the tracked pose (what a mis-tracked frame is to the shape:
-/// data the estimate can only explain by stepping against its belief) is rejected — β stays
-/// where the previous frame left it and no information is added — where without the gate its
-/// step and information enter the estimate.
+/// The innovation gate (`OnlineConfig::innovation_gate`) and the outside gate
+/// (`OnlineConfig::outside_gate`), each alone: after a settled start, a frame whose fingers
+/// jumped ahead of the tracked pose (what a mis-tracked frame is to the shape: data the
+/// estimate can only explain by stepping against its belief, a model sticking out of the
+/// silhouette) is rejected — β stays where the previous frame left it and no information is
+/// added — where without the gates its step and information enter the estimate.
 #[test]
 fn a_frame_the_belief_cannot_explain_is_rejected() {
     let base = default_right_hand();
     let (_, truth) = subject(&base, 0.1, 3);
     let camera = Camera::sr300_qvga();
-    let outlier = |gate: f64| {
+    let outlier = |innovation_gate: f64, outside_gate: f64| {
         let config = OnlineConfig {
-            innovation_gate: gate,
+            innovation_gate,
+            outside_gate,
             ..OnlineConfig::default()
         };
         let mut calib = OnlineCalibrator::new(&base, config, None).unwrap();
@@ -279,11 +281,17 @@ fn a_frame_the_belief_cannot_explain_is_rejected() {
             .sum();
         (after.record.flags.clone(), moved, gained)
     };
-    let (flags, moved, gained) = outlier(OnlineConfig::default().innovation_gate);
-    assert_eq!(flags, ["shape_rejected"]);
-    assert_eq!(moved, 0.0);
-    assert!(gained.abs() < 1e-9, "information added: {gained}");
-    let (flags, moved, gained) = outlier(0.0);
+    let defaults = OnlineConfig::default();
+    for gates in [
+        (defaults.innovation_gate, 0.0),
+        (0.0, defaults.outside_gate),
+    ] {
+        let (flags, moved, gained) = outlier(gates.0, gates.1);
+        assert_eq!(flags, ["shape_rejected"], "gates {gates:?}");
+        assert_eq!(moved, 0.0);
+        assert!(gained.abs() < 1e-9, "information added: {gained}");
+    }
+    let (flags, moved, gained) = outlier(0.0, 0.0);
     assert!(flags.is_empty(), "{flags:?}");
     assert!(
         moved > 0.01 && gained > 0.0,
