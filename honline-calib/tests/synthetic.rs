@@ -222,9 +222,10 @@ fn set_shape_starts_from_the_given_shape() {
 fn absurd_settings_are_refused_with_their_name() {
     let base = default_right_hand();
     type Spoil = fn(&mut OnlineConfig);
-    let cases: [(&str, Spoil); 3] = [
+    let cases: [(&str, Spoil); 4] = [
         ("measurement_weight", |c| c.measurement_weight = -0.5),
         ("shape_prior", |c| c.shape_prior = f64::NAN),
+        ("outside_gate", |c| c.outside_gate = f64::INFINITY),
         ("initial_information", |c| c.initial_information = 0.0),
     ];
     for (name, spoil) in cases {
