@@ -562,9 +562,9 @@ fn fig_4_7_tof() {
     }
 }
 
-/// The six random subjects of the tracking numbers in `honline_calib`'s docs (300 frames,
-/// last-third keypoint error over the true template's), under the noise model `NOISE`
-/// (default `tof`), and how far the final estimate is pulled back toward the template: the
+/// The six random subjects of the tracking numbers in `honline_calib`'s docs (`FRAMES` frames,
+/// default 300 = 10 s; last-third keypoint error over the true template's), under the noise
+/// model `NOISE` (default `tof`), and how far the final estimate is pulled back toward the template: the
 /// least-squares slope of its error `β̂ − β` on the subject's offset `β − β_template` over
 /// every entry of the six (0: no pull, −1: the template kept), the mean excess of each keypoint
 /// over the true template's, and the entries with the largest RMS error. Run by hand.
@@ -572,9 +572,13 @@ fn fig_4_7_tof() {
 #[ignore]
 fn subject_ratios() {
     let noise = std::env::var("NOISE").unwrap_or_else(|_| "tof".into());
+    let frames: usize = std::env::var("FRAMES")
+        .ok()
+        .and_then(|v| v.parse().ok())
+        .unwrap_or(300);
     let seeds: Vec<u64> = (7..=12).collect();
     let runs = parallel(seeds.clone(), |&seed| {
-        let (truth, motion, s) = scenario(&noise, 300, seed);
+        let (truth, motion, s) = scenario(&noise, frames, seed);
         let online = run_online(&s, &truth, None, &motion, config(Estimator::Iekf)).unwrap();
         let reference = run_true_template(&s, &truth, &motion, TrackerConfig::default()).unwrap();
         let ratio = last_third_error(&online.run) / last_third_error(&reference);
@@ -600,7 +604,7 @@ fn subject_ratios() {
         .flat_map(|r| r.2.iter().zip(&r.3))
         .fold((0.0, 0.0), |(sxy, sxx), (e, o)| (sxy + e * o, sxx + o * o));
     println!(
-        "{noise}, subjects {seeds:?}: ratios {} ({within} of {} within 10 %), E_β at the end {e_beta:.2?} mm; error ≈ {:+.3} × offset from the template",
+        "{noise}, {frames} frames, subjects {seeds:?}: ratios {} ({within} of {} within 10 %), E_β at the end {e_beta:.2?} mm; error ≈ {:+.3} × offset from the template",
         ratios.join(" / "),
         runs.len(),
         sxy / sxx
