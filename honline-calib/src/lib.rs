@@ -273,5 +273,8 @@ pub use offline::{
     calibrate_offline, calibrate_offline_from, subsample, Offline, OfflineCalibration,
     OfflineConfig, OfflineError, OfflineIteration, SoftStart, MIN_FRAMES, SUBSAMPLING,
 };
-pub use online::{honline_schedule, OnlineCalibrator, OnlineConfig, OnlineError, OnlineFrame};
+pub use online::{
+    honline_schedule, OnlineCalibrator, OnlineConfig, OnlineError, OnlineFrame, INNOVATION_WINDOW,
+    OUTSIDE_FLOOR,
+};
 pub use shape::{beta_error, error_subset, ShapeSubset};
