@@ -2,27 +2,17 @@
 //! seed, which then watches it for a while (`honline_calib::watch`): on a fist seen from a cold
 //! start, and on a hand that enters the view.
 
+mod common;
+
+use common::keypoint_error;
 use hand_model::kinematics::Pose;
 use hand_model::solver::PcaPrior;
-use hand_model::spheremesh::{default_right_hand, PosedSphereMesh, SphereMeshTemplate};
+use hand_model::spheremesh::default_right_hand;
 use hmodel_spheremesh::synthetic::rendered_frame;
 use honline_calib::watch::SETTLE_FRAMES;
 use honline_calib::{OnlineCalibrator, OnlineConfig, OnlineFrame};
-use nalgebra::Vector3;
 use sensor_io::preprocess::PreprocessedFrame;
-use sensor_io::record::HandRecord;
 use sensor_io::Camera;
-
-/// Mean keypoint error (mm) of a record against `pose` of `t`.
-fn error(rec: &HandRecord, t: &SphereMeshTemplate, pose: &Pose) -> f64 {
-    let expected = PosedSphereMesh::new(t, pose).keypoints(t);
-    rec.keypoints
-        .iter()
-        .zip(&expected)
-        .map(|(k, e)| (Vector3::from(*k) - e).norm())
-        .sum::<f64>()
-        / expected.len() as f64
-}
 
 fn has(out: &OnlineFrame, flag: &str) -> bool {
     out.record.flags.iter().any(|f| f == flag)
@@ -76,8 +66,8 @@ fn a_fist_from_a_cold_start_is_not_calibrated_to_the_wrong_pose() {
         assert_eq!(has(&out, "settling"), f < SETTLE_FRAMES as u64, "frame {f}");
         assert_eq!(out.solved, f >= SETTLE_FRAMES as u64, "frame {f}");
         resets += usize::from(has(&out, "shape_reset"));
-        last = error(&out.record, &t, &fist);
-        seed_last = error(&seed.track(&frame, f, f as f64 / 30.0), &t, &fist);
+        last = keypoint_error(&out.record, &t, &fist);
+        seed_last = keypoint_error(&seed.track(&frame, f, f as f64 / 30.0), &t, &fist);
     }
     println!(
         "fist from a cold start, 45 frames: online {last:.2} mm ({resets} reset), the Ch. 3 tracker {seed_last:.2} mm"
@@ -112,7 +102,7 @@ fn a_hand_entering_the_view_is_found() {
     for k in 0..40usize {
         let frame = rendered_frame(&t, &truth(k), &camera, 1500).unwrap();
         let out = calib.track(&frame, k as u64, 0.0);
-        errors.push(error(&out.record, calib.template(), &truth(k)));
+        errors.push(keypoint_error(&out.record, calib.template(), &truth(k)));
     }
     let first = errors[0];
     let end = errors.last().copied().unwrap();

@@ -5,9 +5,11 @@
 #![allow(dead_code)]
 
 use hand_model::kinematics::Pose;
-use hand_model::spheremesh::{ShapeBasis, SphereMeshTemplate};
+use hand_model::spheremesh::{PosedSphereMesh, ShapeBasis, SphereMeshTemplate};
 use honline_calib::error_subset;
+use nalgebra::Vector3;
 use rand::{Rng, SeedableRng};
+use sensor_io::record::HandRecord;
 
 /// A subject: the template's β with the error subset perturbed by ±`sigma` (relative).
 pub fn subject(base: &SphereMeshTemplate, sigma: f64, seed: u64) -> (Vec<f64>, SphereMeshTemplate) {
@@ -51,4 +53,15 @@ pub fn pose(t: &SphereMeshTemplate, k: usize, bend: bool) -> Pose {
     }
     p.clamp_to_limits(sk);
     p
+}
+
+/// Mean keypoint error (mm) of a record against `pose` of `t`.
+pub fn keypoint_error(rec: &HandRecord, t: &SphereMeshTemplate, pose: &Pose) -> f64 {
+    let expected = PosedSphereMesh::new(t, pose).keypoints(t);
+    rec.keypoints
+        .iter()
+        .zip(&expected)
+        .map(|(k, e)| (Vector3::from(*k) - e).norm())
+        .sum::<f64>()
+        / expected.len() as f64
 }
