@@ -187,7 +187,19 @@
 //!   most; the along-ray slide at 3 / 5 / 10 / 20 mm or unlimited (gate 10 or 15 mm) gives E_β
 //!   0.60–0.74 / 0.38–0.50 / 0.37–0.53 / 0.51–0.65 / 0.46–0.69 mm against 0.30–0.41 at 7.5 mm;
 //!   accepting any slide on the closest point's own element 0.47–0.70 mm; a Huber threshold of
-//!   5 or 10 mm instead of ℓ1 ratios ≥ 1.77. None kept.
+//!   5 or 10 mm instead of ℓ1 ratios ≥ 1.77. The pull toward the template (slope −0.15 to
+//!   −0.17) is not the shape-space prior's: from the default template, with its noise exponent
+//!   p = 1 / 0.5 / 0 the ratios are 1.24 / 1.14 / 1.06 / 1.34 / 1.10 / 1.35, 1.18 / 1.17 / 1.08
+//!   / 1.33 / 1.11 / 1.35 and 1.11 / 1.20 / 1.01 / 1.33 / 1.12 / 1.30 (slope −0.158 / −0.153 /
+//!   −0.165), with ω_shape-space 1 / 0.25 1.25 / 1.15 / 1.08 / 1.35 / 1.09 / 1.36 and 1.32 /
+//!   1.29 / 1.19 / 1.57 / 1.22 / 1.49 (E_β 0.40–0.49 and 0.68–0.81 mm; at 0.25 the ring's
+//!   middle phalanx ends −3.60 ± 0.23 mm short on all six: the data terms' own bias under
+//!   noise, which the prior holds back). At ω_shape-space 0.25 with m2d off too the middle
+//!   phalanges of the index, ring and pinky all end 3.1–3.7 mm short (ring −3.66 ± 0.27 mm over
+//!   the six), so the d2m term with its along-ray registration shortens them under noise;
+//!   without the along-ray registration the bias moves elsewhere and grows (finger bases'
+//!   `base_y` −3.0 to −3.7 mm, the middle finger's proximal phalanx +3.4 mm, a palm center +5.7
+//!   mm in x; ratios 1.71–2.25). None kept.
 //! - The acceptance motion (`eval::online::CalibrationMotion`: each MCP a quarter period ahead
 //!   of its PIP and DIP, so that the phalanges are seen bent one at a time) leaves the PCA
 //!   pose prior's subspace, so the prior's pull, not the shape, sets most of the reference's
