@@ -600,7 +600,7 @@ fn subject_ratios() {
         let error: Vec<f64> = last.iter().zip(&truth).map(|(a, b)| a - b).collect();
         let offset: Vec<f64> = truth.iter().zip(&template).map(|(a, b)| a - b).collect();
         let n = online.frames.len();
-        let middle = &online.frames[n / 3..(2 * n / 3).max(n / 3 + 1).min(n)];
+        let middle = &online.frames[n / 3..2 * n / 3];
         let mid: Vec<f64> = (0..truth.len())
             .map(|i| {
                 mean_std(
@@ -656,10 +656,9 @@ fn subject_ratios() {
         )
     };
     let rms = |(mean, std): (f64, f64)| mean.hypot(std);
-    let mut order: Vec<usize> = (0..names.len()).collect();
-    order.sort_by(|&a, &b| rms(stats(b).0).total_cmp(&rms(stats(a).0)));
-    for &i in order.iter().take(12) {
-        let (name, ((mean, std), (m, sd), offset)) = (&names[i], stats(i));
+    let mut entries: Vec<_> = names.iter().zip((0..names.len()).map(stats)).collect();
+    entries.sort_by(|a, b| rms(b.1 .0).total_cmp(&rms(a.1 .0)));
+    for (name, ((mean, std), (m, sd), offset)) in entries.into_iter().take(12) {
         println!(
             "  {name:24} error {mean:+.2} ± {std:.2} mm (middle third {m:+.2} ± {sd:.2}; offset {offset:+.2} mm)"
         );
