@@ -193,13 +193,20 @@
 //!   / 1.33 / 1.11 / 1.35 and 1.11 / 1.20 / 1.01 / 1.33 / 1.12 / 1.30 (slope −0.158 / −0.153 /
 //!   −0.165), with ω_shape-space 1 / 0.25 1.25 / 1.15 / 1.08 / 1.35 / 1.09 / 1.36 and 1.32 /
 //!   1.29 / 1.19 / 1.57 / 1.22 / 1.49 (E_β 0.40–0.49 and 0.68–0.81 mm; at 0.25 the ring's
-//!   middle phalanx ends −3.60 ± 0.23 mm short on all six: the data terms' own bias under
-//!   noise, which the prior holds back). At ω_shape-space 0.25 with m2d off too the middle
-//!   phalanges of the index, ring and pinky all end 3.1–3.7 mm short (ring −3.66 ± 0.27 mm over
-//!   the six), so the d2m term with its along-ray registration shortens them under noise;
-//!   without the along-ray registration the bias moves elsewhere and grows (finger bases'
-//!   `base_y` −3.0 to −3.7 mm, the middle finger's proximal phalanx +3.4 mm, a palm center +5.7
-//!   mm in x; ratios 1.71–2.25). None kept.
+//!   middle phalanx ends −3.60 ± 0.23 mm short on all six, which the prior holds back). At
+//!   ω_shape-space 0.25 the middle phalanges of the index, ring and pinky all end 3.0–3.7 mm
+//!   short, with m2d off too and whatever the along-ray slide (3 mm, or unlimited with a 10 mm
+//!   gate); they do not with the PCA pose prior off (E_β 0.25–0.34 mm, the lowest measured),
+//!   nor with the pose prior on but none of its pull in β's step
+//!   ([`LmOptions::aux_prior_share`](hand_model::solver::LmOptions::aux_prior_share) 0 instead
+//!   of the 1 − 1/s ≈ 0.91 kept at σ̂ ≈ 5 mm; ratios 1.13 / 1.15 / 0.97 / 1.34 / 1.13 / 1.28,
+//!   E_β 0.32–0.41 mm): the shortening is the pose prior's pull on the bent fingers' angles,
+//!   taken up by the shape. At the default ω that share at 0 alone gives 1.29 / 1.10 / 1.05 /
+//!   1.35 / 1.19 / 1.36 (E_β 0.29–0.37 mm). Without the along-ray registration the errors move
+//!   and grow (finger bases' `base_y` −3.0 to −3.7 mm, a palm center +5.7 mm in x; ratios
+//!   1.71–2.25). None kept: not one of these brings more subjects within 10 %, and the hard
+//!   motions that made the share follow the noise (see `noise_prior_exponent`) were not
+//!   re-measured.
 //! - The acceptance motion (`eval::online::CalibrationMotion`: each MCP a quarter period ahead
 //!   of its PIP and DIP, so that the phalanges are seen bent one at a time) leaves the PCA
 //!   pose prior's subspace, so the prior's pull, not the shape, sets most of the reference's
