@@ -204,9 +204,12 @@
 //!   taken up by the shape. At the default ω that share at 0 alone gives 1.29 / 1.10 / 1.05 /
 //!   1.35 / 1.19 / 1.36 (E_β 0.29–0.37 mm). Without the along-ray registration the errors move
 //!   and grow (finger bases' `base_y` −3.0 to −3.7 mm, a palm center +5.7 mm in x; ratios
-//!   1.71–2.25). None kept: not one of these brings more subjects within 10 %, and the hard
-//!   motions that made the share follow the noise (see `noise_prior_exponent`) were not
-//!   re-measured.
+//!   1.71–2.25). The share at 0 no longer loses the hard motions that made it follow the noise
+//!   (session 20, before the β damping and the gates): the library's 17 ToF sequences 139.11 →
+//!   137.53 mm summed (`crossing` 1.98 → 2.12, `rotating_fist` 2.08 → 2.27), the 74 ToF cold
+//!   starts 233.83 → 232.95 (13 cuts better, 12 worse by more than 0.05 mm); with ω 0.25 as
+//!   well every library ToF motion loses 0.04–0.84 mm (143.20). None kept: not one of these
+//!   brings more subjects within 10 %.
 //! - The acceptance motion (`eval::online::CalibrationMotion`: each MCP a quarter period ahead
 //!   of its PIP and DIP, so that the phalanges are seen bent one at a time) leaves the PCA
 //!   pose prior's subspace, so the prior's pull, not the shape, sets most of the reference's
