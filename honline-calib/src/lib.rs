@@ -208,8 +208,8 @@
 //!   (session 20, before the β damping and the gates): the library's 17 ToF sequences 139.11 →
 //!   137.53 mm summed (`crossing` 1.98 → 2.12, `rotating_fist` 2.08 → 2.27), the 74 ToF cold
 //!   starts 233.83 → 232.95 (13 cuts better, 12 worse by more than 0.05 mm); with ω 0.25 as
-//!   well every library ToF motion loses 0.04–0.84 mm (143.20). None kept: not one of these
-//!   brings more subjects within 10 %.
+//!   well 16 of the 17 lose 0.04–0.84 mm (143.20 in sum). None kept: not one of these brings
+//!   more subjects within 10 %.
 //! - The acceptance motion (`eval::online::CalibrationMotion`: each MCP a quarter period ahead
 //!   of its PIP and DIP, so that the phalanges are seen bent one at a time) leaves the PCA
 //!   pose prior's subspace, so the prior's pull, not the shape, sets most of the reference's
