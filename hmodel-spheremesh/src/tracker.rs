@@ -281,7 +281,8 @@ impl TrackingProblem for Problem<'_> {
     }
 
     fn hypotheses(&self) -> Vec<Hypothesis> {
-        placement_hypotheses(self.ctx.points(), |e, roll, target| {
+        let arm = self.ctx.sensor().wristband.map(|b| b.axis);
+        placement_hypotheses(self.ctx.points(), arm.as_ref(), |e, roll, target| {
             self.placed_mean_pose(e, roll, target)
         })
     }

@@ -8,8 +8,9 @@
 //! mean point-to-model distance or share of unexplained points ([`LossParams`]), tracking is
 //! lost after a window of failed frames, and the re-initializer solves from the current pose
 //! and the mean pose (PCA mean, §2.3.2) placed on the point cloud's centroid with its fingers
-//! along the cloud's principal image axis (both signs) or upright, keeping the one that
-//! explains the points best. It is not Qian et al.'s fingertip detector (htrack's
+//! along the cloud's principal image axis (both signs) or upright — none pointing back along
+//! the forearm where the segmentation found one, the forearm's own direction added — keeping
+//! the one that explains the points best. It is not Qian et al.'s fingertip detector (htrack's
 //! `QianDetection`, ANCHOR-FACTS §5.7).
 
 use std::time::Instant;
@@ -294,11 +295,13 @@ impl TrackingProblem for Problem<'_> {
 
     /// Initial poses from the point cloud ([`placement_hypotheses`]): the mean pose with its
     /// palm center 10 mm behind the cloud's centroid, fingers along ± the principal image axis
-    /// of the cloud, or upright (fingers toward image −y); palm toward the camera, and as
+    /// of the cloud, or upright (fingers toward image −y), or along the forearm (the wristband
+    /// or forearm cut's axis), never back along it; palm toward the camera, and as
     /// backups edge-on, as in the sphere-mesh tracker but with this tracker's own
     /// poor-placement rule ([`Self::is_poor_placement`]).
     fn hypotheses(&self) -> Vec<Hypothesis> {
-        placement_hypotheses(self.ctx.points(), |e, roll, target| {
+        let arm = self.ctx.sensor().wristband.map(|b| b.axis);
+        placement_hypotheses(self.ctx.points(), arm.as_ref(), |e, roll, target| {
             self.placed_mean_pose(e, roll, target)
         })
     }

@@ -204,10 +204,35 @@ pub fn placed_rotation(
     Some(out)
 }
 
+/// The least cosine between the fingers' image direction and the forearm's (toward the hand)
+/// that a placement may take when the segmentation found the forearm ([`placement_directions`]):
+/// about 107°, beyond the wrist's flexion and extension (≈ 80°) seen at any angle.
+pub const ARM_MIN_COSINE: f64 = -0.3;
+
+/// The arm's direction is not added to the placements when one of them is within ≈ 8° of it.
+const ARM_SAME_COSINE: f64 = 0.99;
+
+/// A forearm whose image direction is shorter than this (its unit 3-D axis mostly along the
+/// optical axis) gives no direction to placements.
+const ARM_MIN_IMAGE_LENGTH: f64 = 0.3;
+
 /// Where re-initialization hypotheses put the hand: the point cloud's centroid and the image
 /// directions the fingers may point to — upright (image −y) and ± the principal image axis of
 /// the cloud when it has one. Empty input gives the origin and the upright direction only.
-pub fn placement_directions(points: &[Vector3<f64>]) -> (Vector3<f64>, Vec<Vector2<f64>>) {
+///
+/// `arm` is the forearm's axis toward the hand (camera frame, e.g. from the wristband or the
+/// depth-only segmentation's forearm cut), when known: the directions pointing back along it
+/// (cosine below [`ARM_MIN_COSINE`]) are dropped, and the arm's own image direction is added
+/// (unless one of them is within ≈ 8° of it).
+/// A hand turned upside down in the image fits a silhouette of crossed or folded fingers about
+/// as well as the upright one: without the arm, cold starts on crossed fingers (ToF, `crossing`
+/// from frames 150 and 165) were placed with the wrist at the fingertips by the Ch. 2 tracker,
+/// 88 mm mean keypoint error (36 and 33 mm with it; the other 72 ToF cold starts and the 34
+/// library sequences unchanged, for either tracker).
+pub fn placement_directions(
+    points: &[Vector3<f64>],
+    arm: Option<&Vector3<f64>>,
+) -> (Vector3<f64>, Vec<Vector2<f64>>) {
     let n = points.len().max(1) as f64;
     let centroid = points.iter().fold(Vector3::zeros(), |a, p| a + p) / n;
     let mut cov = Matrix2::zeros();
@@ -227,19 +252,30 @@ pub fn placement_directions(points: &[Vector3<f64>]) -> (Vector3<f64>, Vec<Vecto
         dirs.push(axis);
         dirs.push(-axis);
     }
+    let arm = arm
+        .map(|a| Vector2::new(a.x, a.y))
+        .filter(|a| a.iter().all(|v| v.is_finite()) && a.norm() >= ARM_MIN_IMAGE_LENGTH);
+    if let Some(a) = arm.map(|a| a.normalize()) {
+        dirs.retain(|e| e.dot(&a) >= ARM_MIN_COSINE);
+        if !dirs.iter().any(|e| e.dot(&a) > ARM_SAME_COSINE) {
+            dirs.push(a);
+        }
+    }
     (centroid, dirs)
 }
 
-/// The re-initialization starts on a frame's points: for every roll of [`PLACEMENT_ROLLS`]
+/// The re-initialization starts on a frame's points (and its forearm's axis, see
+/// [`placement_directions`]): for every roll of [`PLACEMENT_ROLLS`]
 /// (a backup or not, as it says) and every direction of [`placement_directions`], the pose
 /// `place(e, roll, target)` builds with the fingers along the image direction `e`, rolled by
 /// `roll` about them, and the palm on `target`, 10 mm behind the cloud's centroid (inside the
 /// hand rather than on its visible surface). Directions where `place` gives `None` are left out.
 pub fn placement_hypotheses(
     points: &[Vector3<f64>],
+    arm: Option<&Vector3<f64>>,
     place: impl Fn(Vector2<f64>, f64, &Vector3<f64>) -> Option<Pose>,
 ) -> Vec<Hypothesis> {
-    let (centroid, dirs) = placement_directions(points);
+    let (centroid, dirs) = placement_directions(points, arm);
     let target = centroid + Vector3::new(0.0, 0.0, 10.0);
     PLACEMENT_ROLLS
         .iter()
@@ -260,10 +296,10 @@ mod tests {
         let points: Vec<_> = (0..20)
             .map(|i| Vector3::new(3.0 * f64::from(i), 1.0, 400.0 + f64::from(i % 2)))
             .collect();
-        let (centroid, dirs) = placement_directions(&points);
+        let (centroid, dirs) = placement_directions(&points, None);
         assert_eq!(dirs.len(), 3);
         // A "pose" recording what it was built from: e, roll, target.
-        let hs = placement_hypotheses(&points, |e, roll, target| {
+        let hs = placement_hypotheses(&points, None, |e, roll, target| {
             (e.x != 0.0 || roll >= 0.0).then(|| Pose {
                 values: vec![e.x, e.y, roll, target.x, target.y, target.z],
             })
@@ -326,12 +362,42 @@ mod tests {
         let pts: Vec<_> = (0..50)
             .map(|i| Vector3::new(f64::from(i) * 2.0, 0.5 * f64::from(i % 3), 400.0))
             .collect();
-        let (c, dirs) = placement_directions(&pts);
+        let (c, dirs) = placement_directions(&pts, None);
         assert!((c.x - 49.0).abs() < 1e-9);
         assert_eq!(dirs.len(), 3);
         assert!(dirs[1].x.abs() > 0.99);
-        let (_, one) = placement_directions(&[]);
+        let (_, one) = placement_directions(&[], None);
         assert_eq!(one, vec![Vector2::new(0.0, -1.0)]);
+    }
+
+    /// A cloud along image x with the forearm coming from its −x end: the fingers may not point
+    /// back along the arm, and the arm's own direction is tried; an arm along the optical axis
+    /// or not finite changes nothing.
+    #[test]
+    fn the_forearm_rules_out_the_fingers_pointing_back_along_it() {
+        let pts: Vec<_> = (0..50)
+            .map(|i| Vector3::new(f64::from(i) * 2.0, 0.5 * f64::from(i % 3), 400.0))
+            .collect();
+        let (_, free) = placement_directions(&pts, None);
+        let arm = Vector3::new(0.8, -0.3, 0.5).normalize();
+        let (_, dirs) = placement_directions(&pts, Some(&arm));
+        let a = Vector2::new(arm.x, arm.y).normalize();
+        assert!(dirs.iter().all(|e| e.dot(&a) >= ARM_MIN_COSINE), "{dirs:?}");
+        // Upright and the +x axis stay, −x goes, the arm's direction (21° from +x) comes.
+        assert_eq!(dirs.len(), 3, "{dirs:?}");
+        assert!(dirs.contains(&free[0]));
+        assert!(dirs.iter().any(|e| e.x > 0.99));
+        assert!(!dirs.iter().any(|e| e.x < -0.99));
+        assert!(dirs.contains(&a));
+        // Along +x itself: nothing added next to the +x axis.
+        let (_, along) = placement_directions(&pts, Some(&Vector3::new(1.0, 0.0, 0.0)));
+        assert_eq!(along.len(), 2, "{along:?}");
+        for ignored in [
+            Vector3::new(0.1, 0.1, 0.99),
+            Vector3::new(f64::NAN, 1.0, 0.0),
+        ] {
+            assert_eq!(placement_directions(&pts, Some(&ignored)).1, free);
+        }
     }
 
     #[test]
