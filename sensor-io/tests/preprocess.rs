@@ -86,3 +86,43 @@ fn wrong_sizes_are_errors() {
     };
     assert!(pre.process(&bad, &cam, &mut out).is_err());
 }
+
+/// The default smoothing lowers a noisy blob's point noise and leaves the depth image (on which
+/// the trackers measure the sensor's noise) as the sensor gave it; `smoothing: None` keeps the
+/// raw depth in the points.
+#[test]
+fn smoothing_reaches_the_points_not_the_depth_image() {
+    use rand::{Rng, SeedableRng};
+    let cam = Camera::sr300_qvga();
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(11);
+    let mut blob = DepthImage::zeros(320, 240);
+    for v in 90..150 {
+        for u in 130..190 {
+            blob.data[v * 320 + u] = 420 + rng.random_range(0..=10);
+        }
+    }
+    let spread = |out: &PreprocessedFrame| {
+        let n = out.points.len() as f64;
+        let mean = out.points.iter().map(|p| p.z).sum::<f64>() / n;
+        (out.points.iter().map(|p| (p.z - mean).powi(2)).sum::<f64>() / n).sqrt()
+    };
+    let mut out = PreprocessedFrame::default();
+    let mut raw = Preprocessor::new(PreprocessConfig {
+        smoothing: None,
+        ..Default::default()
+    });
+    raw.process(&frame(blob.clone()), &cam, &mut out)
+        .expect("raw");
+    let (raw_spread, raw_count) = (spread(&out), out.points.len());
+    let mut smooth = Preprocessor::new(PreprocessConfig::default());
+    smooth
+        .process(&frame(blob.clone()), &cam, &mut out)
+        .expect("smoothed");
+    assert_eq!(out.points.len(), raw_count);
+    assert_eq!(out.depth.data, blob.data, "the depth image is the sensor's");
+    let smoothed = spread(&out);
+    assert!(
+        smoothed < 0.5 * raw_spread,
+        "point depth spread: raw {raw_spread:.2} mm, smoothed {smoothed:.2} mm"
+    );
+}

@@ -36,7 +36,7 @@ use sensor_io::preprocess::PreprocessedFrame;
 use crate::config::{read_config, read_config_over};
 use crate::methods::{ModelRenderer, SphereMeshRenderer};
 use crate::overlay;
-use crate::track::{for_each_frame, load_sphere_mesh};
+use crate::track::{for_each_frame, load_sphere_mesh, PreprocessArgs};
 
 /// The calibration `hands calibrate` runs.
 #[derive(Copy, Clone, Debug, PartialEq, Eq, clap::ValueEnum)]
@@ -117,12 +117,8 @@ pub struct CalibrateArgs {
     /// `CalibrationConfig::clouds`.
     #[arg(long)]
     pub config: Option<PathBuf>,
-    /// Hand segmentation: auto, wristband, depth, presegmented.
-    #[arg(long, default_value = "auto")]
-    pub segmentation: String,
-    /// Sensor points per frame.
-    #[arg(long, default_value_t = 2500)]
-    pub points: usize,
+    #[command(flatten)]
+    pub pre: PreprocessArgs,
     /// Read at most this many frames of the sequence.
     #[arg(long)]
     pub max_frames: Option<usize>,
@@ -187,25 +183,18 @@ pub fn run(args: CalibrateArgs) -> Result<()> {
     let mut tracker = Tracker::new(&base, TrackerConfig::default(), Some(&prior))?;
     let sk = &base.skeleton;
     let (mut poses, mut usable) = (Vec::new(), Vec::new());
-    let read = for_each_frame(
-        &args.sequence,
-        &args.segmentation,
-        args.points,
-        args.max_frames,
-        "track",
-        |sf| {
-            let rec = tracker.track(sf.pre, sf.position as u64, 0.0);
-            usable.push(rec.flags.is_empty());
-            poses.push(Pose {
-                values: sk
-                    .dofs()
-                    .iter()
-                    .map(|d| rec.pose.get(&d.name).copied().unwrap_or(0.0))
-                    .collect(),
-            });
-            Ok(())
-        },
-    )?;
+    let read = for_each_frame(&args.sequence, &args.pre, args.max_frames, "track", |sf| {
+        let rec = tracker.track(sf.pre, sf.position as u64, 0.0);
+        usable.push(rec.flags.is_empty());
+        poses.push(Pose {
+            values: sk
+                .dofs()
+                .iter()
+                .map(|d| rec.pose.get(&d.name).copied().unwrap_or(0.0))
+                .collect(),
+        });
+        Ok(())
+    })?;
     let offline = args.method != CalibrationMethod::Spheremesh;
     let chosen = match (&args.frames, args.every, args.auto) {
         (Some(list), _, _) => {
@@ -261,18 +250,11 @@ fn run_guide(args: &CalibrateArgs, base: &SphereMeshTemplate) -> Result<()> {
     let prior = PcaPrior::project_default();
     let mut calib = OnlineCalibrator::new(base, OnlineConfig::default(), Some(&prior))?;
     let mut camera = None;
-    let read = for_each_frame(
-        &args.sequence,
-        &args.segmentation,
-        args.points,
-        args.max_frames,
-        "online",
-        |sf| {
-            camera = sf.pre.camera.clone().or(camera.take());
-            calib.track(sf.pre, sf.position as u64, 0.0);
-            Ok(())
-        },
-    )?;
+    let read = for_each_frame(&args.sequence, &args.pre, args.max_frames, "online", |sf| {
+        camera = sf.pre.camera.clone().or(camera.take());
+        calib.track(sf.pre, sf.position as u64, 0.0);
+        Ok(())
+    })?;
     let camera = camera.context("no frame of the sequence has a camera")?;
     let sk = &base.skeleton;
     let digits = |place: &Pose, sample: &[f64]| {
@@ -547,8 +529,7 @@ fn read_chosen(args: &CalibrateArgs, chosen: &[usize]) -> Result<Vec<Preprocesse
     let last = chosen.iter().max().map_or(0, |&m| m + 1);
     for_each_frame(
         &args.sequence,
-        &args.segmentation,
-        args.points,
+        &args.pre,
         Some(args.max_frames.map_or(last, |m| m.min(last))),
         "read",
         |sf| {
@@ -709,8 +690,7 @@ fn write_overlays(
     let templates = [before.0, after.0];
     for_each_frame(
         &args.sequence,
-        &args.segmentation,
-        args.points,
+        &args.pre,
         args.max_frames,
         "overlays",
         |sf| {

@@ -11,6 +11,7 @@ use hand_model::spheremesh::SphereMeshTemplate;
 
 use crate::methods::{Method, MethodModel, TrackSettings};
 use crate::scoring::{write_report, MethodRun, SensorFrame};
+use crate::track::PreprocessArgs;
 
 /// Compare methods on one sequence.
 ///
@@ -26,12 +27,8 @@ pub struct CompareArgs {
     /// `subject:<name>` (default: the default hand).
     #[arg(long)]
     pub template: Option<String>,
-    /// Segmentation (as in `hands track`).
-    #[arg(long, default_value = "auto")]
-    pub segmentation: String,
-    /// Number of sensor points per frame.
-    #[arg(long, default_value_t = 2500)]
-    pub points: usize,
+    #[command(flatten)]
+    pub pre: PreprocessArgs,
     /// Compare on at most this many frames.
     #[arg(long)]
     pub frames: Option<usize>,
@@ -40,13 +37,11 @@ pub struct CompareArgs {
     pub out: PathBuf,
 }
 
-/// How the frames of a comparison are read: segmentation and sensor points (as in `hands
-/// track`), at most `frames` frames, a progress bar named `label`.
+/// How the frames of a comparison are read: preprocessed as in `hands track`, at most `frames`
+/// frames, a progress bar named `label`.
 pub struct FrameOptions<'a> {
-    /// Segmentation name.
-    pub segmentation: &'a str,
-    /// Sensor points per frame.
-    pub points: usize,
+    /// Segmentation, sensor points, smoothing.
+    pub pre: &'a PreprocessArgs,
     /// Frame limit.
     pub frames: Option<usize>,
     /// Progress bar label.
@@ -75,33 +70,26 @@ pub fn compare_methods(
         .map(|m| m.tracker(prior, &settings))
         .collect::<Result<Vec<_>>>()?;
     let mut runs: Vec<MethodRun> = methods.iter().map(|m| MethodRun::new(m.name())).collect();
-    crate::track::for_each_frame(
-        sequence,
-        opts.segmentation,
-        opts.points,
-        opts.frames,
-        opts.label,
-        |sf| {
-            let index = sf.truth.map_or(sf.position as u64, |t| t.frame);
-            let timestamp = sf.truth.map_or(0.0, |t| t.timestamp);
-            let camera = sf.pre.camera.as_ref().context("no camera (a bug)")?;
-            let frame = SensorFrame {
-                position: sf.position,
-                pre: sf.pre,
-                truth: sf.truth,
-            };
-            for (t, run) in trackers.iter_mut().zip(runs.iter_mut()) {
-                let mut rec = t.track(sf.pre, index, timestamp);
-                rec.timing_us.insert("preprocess".into(), sf.preprocess_us);
-                let distances = t.point_distances();
-                let model = t
-                    .model(camera)
-                    .with_context(|| format!("{}: rendering frame {}", run.name, sf.position))?;
-                run.push(&frame, rec, Some(model), &distances)?;
-            }
-            Ok(())
-        },
-    )?;
+    crate::track::for_each_frame(sequence, opts.pre, opts.frames, opts.label, |sf| {
+        let index = sf.truth.map_or(sf.position as u64, |t| t.frame);
+        let timestamp = sf.truth.map_or(0.0, |t| t.timestamp);
+        let camera = sf.pre.camera.as_ref().context("no camera (a bug)")?;
+        let frame = SensorFrame {
+            position: sf.position,
+            pre: sf.pre,
+            truth: sf.truth,
+        };
+        for (t, run) in trackers.iter_mut().zip(runs.iter_mut()) {
+            let mut rec = t.track(sf.pre, index, timestamp);
+            rec.timing_us.insert("preprocess".into(), sf.preprocess_us);
+            let distances = t.point_distances();
+            let model = t
+                .model(camera)
+                .with_context(|| format!("{}: rendering frame {}", run.name, sf.position))?;
+            run.push(&frame, rec, Some(model), &distances)?;
+        }
+        Ok(())
+    })?;
     Ok(runs)
 }
 
@@ -119,8 +107,7 @@ pub fn run(args: CompareArgs) -> Result<()> {
         &template,
         Some(&prior),
         &FrameOptions {
-            segmentation: &args.segmentation,
-            points: args.points,
+            pre: &args.pre,
             frames: args.frames,
             label: "compare",
         },

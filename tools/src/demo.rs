@@ -26,6 +26,7 @@ use sensor_io::Camera;
 
 use crate::compare::{compare_methods, FrameOptions};
 use crate::scoring::write_report;
+use crate::track::PreprocessArgs;
 
 /// Run the demo: synthesize → preprocess → track with every method → score, writing
 /// everything under `--out`.
@@ -174,8 +175,7 @@ pub fn run(args: DemoArgs) -> Result<()> {
         synth.template(),
         Some(&prior),
         &FrameOptions {
-            segmentation: "auto",
-            points: 2500,
+            pre: &PreprocessArgs::default(),
             frames: None,
             label: "track",
         },

@@ -12,6 +12,7 @@ use sensor_io::io::{is_mcap, open_sequence};
 use sensor_io::record::HandRecord;
 
 use crate::scoring::{write_report, MethodRun, SensorFrame};
+use crate::track::PreprocessArgs;
 
 /// Evaluate a track against its sequence.
 ///
@@ -31,12 +32,9 @@ pub struct EvalArgs {
     /// `subject:<name>` (default: the default hand, as in `hands track`).
     #[arg(long)]
     pub template: Option<String>,
-    /// Segmentation of the sensor frames (as in `hands track`).
-    #[arg(long, default_value = "auto")]
-    pub segmentation: String,
-    /// Number of sensor points per frame for E_d2m (0 = every silhouette pixel).
-    #[arg(long, default_value_t = 2500)]
-    pub points: usize,
+    /// The sensor frames' preprocessing (as in `hands track`; the points are E_d2m's).
+    #[command(flatten)]
+    pub pre: PreprocessArgs,
     /// Output folder.
     #[arg(long, default_value = "eval-report")]
     pub out: PathBuf,
@@ -99,53 +97,46 @@ pub fn run(args: EvalArgs) -> Result<()> {
     let mut renderer = model.renderer();
     let mut run = MethodRun::new(method.name());
     let mut truth_frames = 0usize;
-    let frames = crate::track::for_each_frame(
-        &args.sequence,
-        &args.segmentation,
-        args.points,
-        None,
-        "eval",
-        |sf| {
-            let Some(rec) = records.get(sf.position) else {
-                bail!(
+    let frames = crate::track::for_each_frame(&args.sequence, &args.pre, None, "eval", |sf| {
+        let Some(rec) = records.get(sf.position) else {
+            bail!(
                     "the track {} has {} frames but the sequence {} has more: evaluate a track on the sequence it was computed from (all of its frames)",
                     args.track.display(),
                     records.len(),
                     args.sequence.display()
                 );
-            };
-            check_layout(&args, sf.position, rec, sf.truth)?;
-            truth_frames += usize::from(sf.truth.is_some_and(|t| !t.keypoints.is_empty()));
-            let rendered = if rec.pose.is_empty() {
-                None
-            } else {
-                let pose = Pose::from_named(
-                    model.skeleton(),
-                    rec.pose.iter().map(|(k, &v)| (k.as_str(), v)),
+        };
+        check_layout(&args, sf.position, rec, sf.truth)?;
+        truth_frames += usize::from(sf.truth.is_some_and(|t| !t.keypoints.is_empty()));
+        let rendered = if rec.pose.is_empty() {
+            None
+        } else {
+            let pose = Pose::from_named(
+                model.skeleton(),
+                rec.pose.iter().map(|(k, &v)| (k.as_str(), v)),
+            )
+            .with_context(|| {
+                format!(
+                    "{} frame {}: the pose does not fit the `{}` model (is --model right?)",
+                    args.track.display(),
+                    sf.position,
+                    method.name()
                 )
-                .with_context(|| {
-                    format!(
-                        "{} frame {}: the pose does not fit the `{}` model (is --model right?)",
-                        args.track.display(),
-                        sf.position,
-                        method.name()
-                    )
-                })?;
-                let camera = sf.pre.camera.as_ref().context("no camera (a bug)")?;
-                renderer.set_shape(&rec.shape).with_context(|| {
-                    format!("{} frame {}: its shape", args.track.display(), sf.position)
-                })?;
-                Some(renderer.render(&pose, camera)?.clone())
-            };
-            let frame = SensorFrame {
-                position: sf.position,
-                pre: sf.pre,
-                truth: sf.truth,
-            };
-            run.push(&frame, rec.clone(), rendered.as_ref(), &[])?;
-            Ok(())
-        },
-    )?;
+            })?;
+            let camera = sf.pre.camera.as_ref().context("no camera (a bug)")?;
+            renderer.set_shape(&rec.shape).with_context(|| {
+                format!("{} frame {}: its shape", args.track.display(), sf.position)
+            })?;
+            Some(renderer.render(&pose, camera)?.clone())
+        };
+        let frame = SensorFrame {
+            position: sf.position,
+            pre: sf.pre,
+            truth: sf.truth,
+        };
+        run.push(&frame, rec.clone(), rendered.as_ref(), &[])?;
+        Ok(())
+    })?;
     if crate::interrupt::requested() {
         bail!("interrupted after {frames} frames: nothing written");
     }

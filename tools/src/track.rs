@@ -14,7 +14,7 @@ use hand_model::spheremesh::SphereMeshTemplate;
 use honline_calib::Estimator;
 use sensor_io::io::{open_sequence, write_atomic, McapWriter, SequenceWriter, TRACK_TOPIC};
 use sensor_io::preprocess::{
-    DepthOnlyParams, PreprocessConfig, PreprocessedFrame, Preprocessor, Segmentation,
+    DepthOnlyParams, PreprocessConfig, PreprocessedFrame, Preprocessor, Segmentation, SmoothParams,
     WristbandParams,
 };
 
@@ -63,13 +63,8 @@ pub struct TrackArgs {
     /// build`), `htrack:<dir>` (the original htrack files) or `none`.
     #[arg(long, default_value = "project")]
     pub prior: String,
-    /// Segmentation: `auto` (the wristband where the frame has color and a band is found, else
-    /// depth only), `wristband`, `depth`, `presegmented`.
-    #[arg(long, default_value = "auto")]
-    pub segmentation: String,
-    /// Number of sensor points per frame (0 = every silhouette pixel).
-    #[arg(long, default_value_t = 2500)]
-    pub points: usize,
+    #[command(flatten)]
+    pub pre: PreprocessArgs,
     /// Track at most this many frames.
     #[arg(long)]
     pub frames: Option<usize>,
@@ -242,6 +237,48 @@ fn load_prior(spec: &str) -> Result<Option<PcaPrior>> {
     }
 }
 
+/// How the frames of a sequence are preprocessed: the options of every command that reads one.
+#[derive(Args, Clone, Debug)]
+pub struct PreprocessArgs {
+    /// Segmentation: `auto` (the wristband where the frame has color and a band is found, else
+    /// depth only), `wristband`, `depth`, `presegmented`.
+    #[arg(long, default_value = "auto")]
+    pub segmentation: String,
+    /// Number of sensor points per frame (0 = every silhouette pixel).
+    #[arg(long, default_value_t = 2500)]
+    pub points: usize,
+    /// Radius (px) of the edge-aware smoothing of the hand's depth before its points are made
+    /// (beyond the thesis: `sensor_io::preprocess::smooth_depth`); 0: the raw depth, as the
+    /// thesis.
+    #[arg(long, default_value_t = 1)]
+    pub smoothing: u32,
+}
+
+impl Default for PreprocessArgs {
+    fn default() -> Self {
+        Self {
+            segmentation: "auto".into(),
+            points: 2500,
+            smoothing: SmoothParams::default().radius,
+        }
+    }
+}
+
+impl PreprocessArgs {
+    /// The preprocessor's settings with `segmentation` instead of the named one.
+    fn config(&self, segmentation: Segmentation) -> PreprocessConfig {
+        PreprocessConfig {
+            segmentation,
+            num_points: self.points,
+            smoothing: (self.smoothing > 0).then(|| SmoothParams {
+                radius: self.smoothing,
+                ..SmoothParams::default()
+            }),
+            ..Default::default()
+        }
+    }
+}
+
 fn segmentation(name: &str) -> Result<Segmentation> {
     Ok(match name {
         "wristband" | "auto" => Segmentation::Wristband(WristbandParams::default()),
@@ -296,8 +333,7 @@ pub(crate) struct SequenceFrame<'a> {
 /// stopping after `limit` frames or on Ctrl-C. Returns the number of frames.
 pub(crate) fn for_each_frame(
     sequence: &Path,
-    segmentation_name: &str,
-    points: usize,
+    options: &PreprocessArgs,
     limit: Option<usize>,
     label: &'static str,
     mut f: impl FnMut(SequenceFrame<'_>) -> Result<()>,
@@ -305,17 +341,9 @@ pub(crate) fn for_each_frame(
     let mut reader =
         open_sequence(sequence).with_context(|| format!("opening {}", sequence.display()))?;
     let camera = reader.camera().clone();
-    let mut pre = Preprocessor::new(PreprocessConfig {
-        segmentation: segmentation(segmentation_name)?,
-        num_points: points,
-        ..Default::default()
-    });
-    let mut fallback = (segmentation_name == "auto").then(|| {
-        Preprocessor::new(PreprocessConfig {
-            segmentation: Segmentation::DepthOnly(DepthOnlyParams::default()),
-            num_points: points,
-            ..Default::default()
-        })
+    let mut pre = Preprocessor::new(options.config(segmentation(&options.segmentation)?));
+    let mut fallback = (options.segmentation == "auto").then(|| {
+        Preprocessor::new(options.config(Segmentation::DepthOnly(DepthOnlyParams::default())))
     });
     let total = match (reader.len(), limit) {
         (Some(n), Some(m)) => Some(n.min(m)),
@@ -371,50 +399,43 @@ fn track_sequence(args: &TrackArgs, tracker: &mut dyn FrameTracker) -> Result<()
     let mut stage_us: BTreeMap<String, Vec<f64>> = BTreeMap::new();
     let mut flags: BTreeMap<String, usize> = BTreeMap::new();
     let mut errors = Vec::new();
-    let frames = for_each_frame(
-        &args.sequence,
-        &args.segmentation,
-        args.points,
-        args.frames,
-        "track",
-        |sf| {
-            let index = sf.truth.map_or(sf.position as u64, |t| t.frame);
-            let timestamp = sf.truth.map_or(0.0, |t| t.timestamp);
-            let mut rec = tracker.track(sf.pre, index, timestamp);
-            rec.timing_us.insert("preprocess".into(), sf.preprocess_us);
-            for (k, v) in &rec.timing_us {
-                stage_us.entry(k.clone()).or_default().push(*v);
+    let frames = for_each_frame(&args.sequence, &args.pre, args.frames, "track", |sf| {
+        let index = sf.truth.map_or(sf.position as u64, |t| t.frame);
+        let timestamp = sf.truth.map_or(0.0, |t| t.timestamp);
+        let mut rec = tracker.track(sf.pre, index, timestamp);
+        rec.timing_us.insert("preprocess".into(), sf.preprocess_us);
+        for (k, v) in &rec.timing_us {
+            stage_us.entry(k.clone()).or_default().push(*v);
+        }
+        for f in &rec.flags {
+            *flags.entry(f.clone()).or_default() += 1;
+        }
+        if let Some(e) = sf
+            .truth
+            .and_then(|t| frame_error(&rec.keypoints, &t.keypoints))
+        {
+            errors.push(e);
+        }
+        if !rec.is_finite() {
+            bail!(
+                "frame {}: the tracker produced a non-finite record (a bug)",
+                sf.position
+            );
+        }
+        if let Some(dir) = &args.overlay {
+            write_overlay(dir, index, tracker, sf.pre)?;
+        }
+        match mcap.as_mut() {
+            Some(w) => w
+                .write(sf.frame, Some(&rec))
+                .with_context(|| format!("writing {}", args.out.display()))?,
+            None => {
+                lines.push_str(&serde_json::to_string(&rec)?);
+                lines.push('\n');
             }
-            for f in &rec.flags {
-                *flags.entry(f.clone()).or_default() += 1;
-            }
-            if let Some(e) = sf
-                .truth
-                .and_then(|t| frame_error(&rec.keypoints, &t.keypoints))
-            {
-                errors.push(e);
-            }
-            if !rec.is_finite() {
-                bail!(
-                    "frame {}: the tracker produced a non-finite record (a bug)",
-                    sf.position
-                );
-            }
-            if let Some(dir) = &args.overlay {
-                write_overlay(dir, index, tracker, sf.pre)?;
-            }
-            match mcap.as_mut() {
-                Some(w) => w
-                    .write(sf.frame, Some(&rec))
-                    .with_context(|| format!("writing {}", args.out.display()))?,
-                None => {
-                    lines.push_str(&serde_json::to_string(&rec)?);
-                    lines.push('\n');
-                }
-            }
-            Ok(())
-        },
-    )?;
+        }
+        Ok(())
+    })?;
     match mcap.as_mut() {
         Some(w) => w.finish(),
         None => write_atomic(&args.out, lines.as_bytes()),

@@ -1,6 +1,7 @@
 //! Per-frame preprocessing (thesis §2.2 "Preprocessing", Fig. 2.5; §3.6 "Downsampling";
 //! Taylor et al. 2016 §3.4): median downsampling, range clipping, hand segmentation (wristband or
-//! depth-only), normals from the depth image, point subsampling, and the silhouette's distance
+//! depth-only), edge-aware smoothing of the hand's depth (beyond the thesis, [`smooth_depth`]),
+//! normals from the depth image, point subsampling, and the silhouette's distance
 //! transform, assembled by [`Preprocessor`]; the depth noise measured from the data
 //! ([`depth_noise`]).
 
@@ -10,6 +11,7 @@ mod noise;
 mod normals;
 mod pipeline;
 mod segment;
+mod smooth;
 mod subsample;
 
 pub use downsample::{clip_range, median_downsample};
@@ -23,4 +25,5 @@ pub use segment::{
     rgb_to_hsv, segment_depth_only, segment_wristband, DepthOnlyParams, HandSegment,
     SegmentScratch, Wristband, WristbandParams,
 };
+pub use smooth::{smooth_depth, SmoothParams};
 pub use subsample::{subsample_uniform, FarthestSampler};

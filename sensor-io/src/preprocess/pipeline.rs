@@ -9,6 +9,7 @@ use super::normals::depth_normals;
 use super::segment::{
     segment_depth_only, segment_wristband, DepthOnlyParams, HandSegment, WristbandParams,
 };
+use super::smooth::{smooth_depth, SmoothParams};
 use super::subsample::{subsample_uniform, FarthestSampler};
 use crate::camera::Camera;
 use crate::dt::DistanceTransform;
@@ -54,6 +55,11 @@ pub struct PreprocessConfig {
     pub normal_radius: u32,
     /// Seed of the stochastic subsampling.
     pub seed: u64,
+    /// Edge-aware smoothing of the hand's depth before its points are made ([`smooth_depth`];
+    /// `None`: the raw depth, as the thesis). Only the points are smoothed: the processed depth
+    /// image keeps the sensor's depth, so that the noise the trackers measure on it
+    /// ([`super::depth_noise`]) is the sensor's, and the normals are the raw depth's.
+    pub smoothing: Option<SmoothParams>,
 }
 
 impl Default for PreprocessConfig {
@@ -67,6 +73,7 @@ impl Default for PreprocessConfig {
             subsampling: Subsampling::Uniform,
             normal_radius: 1,
             seed: 5001,
+            smoothing: Some(SmoothParams::default()),
         }
     }
 }
@@ -105,6 +112,8 @@ pub struct Preprocessor {
     dropout_scratch: DropoutScratch,
     /// The silhouette of the distance transform (the hand's, its enclosed dropouts closed).
     closed: Mask,
+    /// The smoothed depth ([`PreprocessConfig::smoothing`]).
+    smoothed: Vec<f64>,
 }
 
 impl Preprocessor {
@@ -191,13 +200,28 @@ impl Preprocessor {
             .compute(if closed { &self.closed } else { &out.hand.mask });
         self.all_points.clear();
         self.all_pixels.clear();
+        let smoothed = cfg.smoothing.is_some();
+        if let Some(params) = &cfg.smoothing {
+            smooth_depth(
+                &out.depth,
+                &out.hand.mask,
+                params,
+                cam.depth_unit_mm,
+                &mut self.smoothed,
+            );
+        }
         let w = cam.width as usize;
         for (i, &m) in out.hand.mask.data.iter().enumerate() {
             if m != 0 && out.depth.data[i] != 0 {
+                let z = if smoothed {
+                    self.smoothed[i]
+                } else {
+                    f64::from(out.depth.data[i])
+                };
                 self.all_points.push(cam.backproject(
                     (i % w) as f64,
                     (i / w) as f64,
-                    out.depth.data[i] as f64 * cam.depth_unit_mm,
+                    z * cam.depth_unit_mm,
                 ));
                 self.all_pixels.push(i as u32);
             }
