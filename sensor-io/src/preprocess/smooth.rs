@@ -64,7 +64,7 @@ pub fn smooth_depth(
     out.resize(depth.data.len(), 0.0);
     let member = |i: usize| mask.data[i] != 0 && depth.data[i] != 0;
     let sized = mask.width == depth.width && mask.height == depth.height;
-    if !sized || !(unit_mm.is_finite() && unit_mm > 0.0) || params.radius == 0 {
+    if !(sized && unit_mm.is_finite() && unit_mm > 0.0) || params.radius == 0 {
         for (i, o) in out.iter_mut().enumerate() {
             if !sized || member(i) {
                 *o = f64::from(depth.data[i]);
