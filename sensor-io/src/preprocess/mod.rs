@@ -17,7 +17,8 @@ mod subsample;
 pub use downsample::{clip_range, median_downsample};
 pub use dropouts::{close_dropouts, DropoutScratch, CLOSE_PX, DROPOUT_GATE_PX};
 pub use noise::{
-    depth_noise, depth_noise_with, gate_for_noise, noise_scale, slide_for_noise, NoiseMonitor,
+    depth_noise, depth_noise_with, gate_for_noise, is_noisy, noise_scale, slide_for_noise,
+    NoiseMonitor,
 };
 pub use normals::depth_normals;
 pub use pipeline::{PreprocessConfig, PreprocessedFrame, Preprocessor, Segmentation, Subsampling};

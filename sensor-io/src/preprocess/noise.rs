@@ -28,8 +28,13 @@ pub fn noise_scale(sigma: f64) -> f64 {
 /// `min_noise` (≤ 0: always), else `None`: the switch of the trackers' along-ray
 /// correspondences, which pay off under noise and cost a rendering of the points' pixels.
 pub fn gate_for_noise(gate: Option<f64>, min_noise: f64, sigma: Option<f64>) -> Option<f64> {
-    let noisy = min_noise <= 0.0 || sigma.is_some_and(|s| s >= min_noise);
-    gate.filter(|_| noisy)
+    gate.filter(|_| is_noisy(min_noise, sigma))
+}
+
+/// Whether data of measured depth noise `sigma` (mm; `None`: not measured yet) count as noisy
+/// for a switch set at `min_noise` (≤ 0: always): σ̂ ≥ `min_noise`.
+pub fn is_noisy(min_noise: f64, sigma: Option<f64>) -> bool {
+    min_noise <= 0.0 || sigma.is_some_and(|s| s >= min_noise)
 }
 
 /// How far the trackers' along-ray footpoint may slide from the closest point on data of

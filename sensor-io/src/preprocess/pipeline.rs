@@ -5,6 +5,7 @@ use nalgebra::Vector3;
 
 use super::downsample::{clip_range, median_downsample};
 use super::dropouts::{close_dropouts, DropoutScratch};
+use super::noise::{is_noisy, NoiseMonitor};
 use super::normals::depth_normals;
 use super::segment::{
     segment_depth_only, segment_wristband, DepthOnlyParams, HandSegment, WristbandParams,
@@ -99,7 +100,8 @@ pub struct PreprocessedFrame {
     pub pixels: Vec<u32>,
 }
 
-/// Runs the pipeline with reusable buffers.
+/// Runs the pipeline with reusable buffers; one per sequence (the smoothing follows the
+/// sequence's depth noise and frame count, [`SmoothParams`]).
 #[derive(Clone, Debug, Default)]
 pub struct Preprocessor {
     /// Settings.
@@ -114,6 +116,10 @@ pub struct Preprocessor {
     closed: Mask,
     /// The smoothed depth ([`PreprocessConfig::smoothing`]).
     smoothed: Vec<f64>,
+    /// The depth noise of the frames so far, for [`SmoothParams::min_noise`].
+    noise: NoiseMonitor,
+    /// Frames processed so far, for [`SmoothParams::after_frames`].
+    frames: usize,
 }
 
 impl Preprocessor {
@@ -200,8 +206,14 @@ impl Preprocessor {
             .compute(if closed { &self.closed } else { &out.hand.mask });
         self.all_points.clear();
         self.all_pixels.clear();
-        let smoothed = cfg.smoothing.is_some();
-        if let Some(params) = &cfg.smoothing {
+        self.frames += 1;
+        let frames = self.frames;
+        let smoothing = cfg.smoothing.filter(|p| {
+            self.noise.observe(&out.depth, &out.hand.mask);
+            is_noisy(p.min_noise, self.noise.sigma()) && frames > p.after_frames
+        });
+        let smoothed = smoothing.is_some();
+        if let Some(params) = &smoothing {
             smooth_depth(
                 &out.depth,
                 &out.hand.mask,
