@@ -87,12 +87,13 @@ fn wrong_sizes_are_errors() {
     assert!(pre.process(&bad, &cam, &mut out).is_err());
 }
 
-/// The default smoothing lowers a noisy blob's point noise and leaves the depth image (on which
-/// the trackers measure the sensor's noise) as the sensor gave it; `smoothing: None` keeps the
-/// raw depth in the points.
+/// The default smoothing lowers a noisy blob's point noise from a sequence's 31st frame on and
+/// leaves the depth image (on which the trackers measure the sensor's noise) as the sensor gave
+/// it; `smoothing: None` keeps the raw depth in the points, and so do the first 30 frames.
 #[test]
 fn smoothing_reaches_the_points_not_the_depth_image() {
     use rand::{Rng, SeedableRng};
+    use sensor_io::preprocess::SmoothParams;
     let cam = Camera::sr300_qvga();
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(11);
     let mut blob = DepthImage::zeros(320, 240);
@@ -113,16 +114,39 @@ fn smoothing_reaches_the_points_not_the_depth_image() {
     });
     raw.process(&frame(blob.clone()), &cam, &mut out)
         .expect("raw");
-    let (raw_spread, raw_count) = (spread(&out), out.points.len());
+    let (raw_spread, raw_points) = (spread(&out), out.points.clone());
     let mut smooth = Preprocessor::new(PreprocessConfig::default());
-    smooth
-        .process(&frame(blob.clone()), &cam, &mut out)
-        .expect("smoothed");
-    assert_eq!(out.points.len(), raw_count);
-    assert_eq!(out.depth.data, blob.data, "the depth image is the sensor's");
+    let after = SmoothParams::default().after_frames;
+    for k in 0..=after {
+        smooth
+            .process(&frame(blob.clone()), &cam, &mut out)
+            .expect("smoothed");
+        assert_eq!(out.depth.data, blob.data, "the depth image is the sensor's");
+        if k < after {
+            assert_eq!(out.points, raw_points, "frame {k} is not smoothed yet");
+        }
+    }
+    assert_eq!(out.points.len(), raw_points.len());
     let smoothed = spread(&out);
     assert!(
         smoothed < 0.5 * raw_spread,
         "point depth spread: raw {raw_spread:.2} mm, smoothed {smoothed:.2} mm"
     );
+    // Exact depth (a tilted plane, noise well under `min_noise`) is never smoothed.
+    let mut exact = blob.clone();
+    for (i, d) in exact.data.iter_mut().enumerate() {
+        if *d != 0 {
+            *d = 400 + (i % 320) as u16 / 4;
+        }
+    }
+    let mut quiet = Preprocessor::new(PreprocessConfig::default());
+    let mut first = PreprocessedFrame::default();
+    raw.process(&frame(exact.clone()), &cam, &mut first)
+        .expect("raw");
+    for _ in 0..=after {
+        quiet
+            .process(&frame(exact.clone()), &cam, &mut out)
+            .expect("exact");
+    }
+    assert_eq!(out.points, first.points);
 }
