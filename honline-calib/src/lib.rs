@@ -210,6 +210,16 @@
 //!   starts 233.83 → 232.95 (13 cuts better, 12 worse by more than 0.05 mm); with ω 0.25 as
 //!   well 16 of the 17 lose 0.04–0.84 mm (143.20 in sum). None kept: not one of these brings
 //!   more subjects within 10 %.
+//! - Session 32: the preprocessing smooths noisy depth from a sequence's 31st frame on
+//!   (`sensor_io::preprocess::smooth_depth`; `--smoothing 0`, or `PreprocessConfig::smoothing`
+//!   `None`, for the raw depth). Tracking gains under ToF, with and without online calibration
+//!   (see there), but the shape estimate does not (E_β 0.42 / 0.36 / 0.38 / 0.37 / 0.31 / 0.41
+//!   mm on subjects 7–12 against 0.41 / 0.33 / 0.41 / 0.35 / 0.30 / 0.42 raw), and the true
+//!   template's tracking gains more, so the ToF ratios rise to 1.57 / 1.25 / 1.09 / 1.78 / 1.20
+//!   / 1.59 (1.31 / 1.10 / 1.05 / 1.36 / 1.13 / 1.36 on the raw depth); the keypoints' excess
+//!   over the true template's, 0.35 mm in the mean over the 21 raw, is 0.40 mm (the knuckles'
+//!   unchanged: index / ring / pinky MCP +0.81 / +0.79 / +1.21 mm). Noise-free sequences are
+//!   not smoothed.
 //! - The acceptance motion (`eval::online::CalibrationMotion`: each MCP a quarter period ahead
 //!   of its PIP and DIP, so that the phalanges are seen bent one at a time) leaves the PCA
 //!   pose prior's subspace, so the prior's pull, not the shape, sets most of the reference's

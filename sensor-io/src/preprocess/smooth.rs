@@ -15,20 +15,35 @@
 //! Why: a time-of-flight sensor's per-pixel noise (≈ 5 mm at 40 cm in the synthetic ToF model)
 //! puts many points inside the thin fingers, where their closest points are back-facing and
 //! biased. A 3×3 window divides independent noise by 3; the surface's own curvature moves the
-//! mean by a few hundredths of a millimetre on a finger. Only the points are smoothed (see
-//! [`super::PreprocessConfig::smoothing`]): the trackers still measure the sensor's own noise,
-//! and on noisy data keep registering points along their camera rays, which the cold starts
-//! need — with the noise measured on the smoothed depth (below the along-ray threshold), the
-//! sphere-mesh tracker's 74 ToF cold starts went 236.49 → 285.40 mm (summed mean keypoint
-//! error), fists placed from afar lost, though twice as fast.
+//! mean by a few hundredths of a millimetre at a finger's middle, a few tenths next to its
+//! outline. Only the points are smoothed ([`super::PreprocessConfig::smoothing`]): the trackers
+//! still measure the sensor's own noise and keep registering points along their camera rays on
+//! noisy data. When it applies ([`SmoothParams`]):
+//! - Only on noisy depth (`min_noise`, the along-ray switch's 1.5 mm): exact depth gains
+//!   nothing that can be told from chance. The sphere-mesh tracker's 64 noise-free cold starts,
+//!   smoothed from their 31st frame: 6 cuts better, 8 worse, median change −0.01 mm (116.60 →
+//!   104.24 mm summed, carried by one fast turn); from the first frame 158.27 mm (a fist lost).
+//! - From a sequence's 31st frame (`after_frames`): smoothed from the first frame, fists placed
+//!   from afar stayed stuck where the raw depth let them converge (ToF `rotating_fist` from
+//!   frame 60, sphere-mesh tracker: 2.79 → 22.27 mm; from frame 165 7.71 → 33.60 mm), though
+//!   most cold starts gained.
 //!
-//! Measured on the sphere-mesh tracker (teaser, 240 frames, 60 Hz, mean keypoint error and
-//! median time a frame):
-//! - ToF: 0.97 → 0.67 mm and 14.1 → 10.8 ms (fewer points inside the fingers, so fewer
-//!   front-facing substitutes to find);
-//! - noise-free (millimetre-quantized): 0.19 → 0.18 mm; structured light 0.35 → 0.29 mm;
-//! - a 5×5 window: ToF 0.65 mm but noise-free 0.35 mm (the curvature's bias), so the default
-//!   radius is 1.
+//! Measured as it is (smoothing from the 31st frame of noisy sequences), mean keypoint error:
+//! - 74 ToF cold starts (the library's motions and random subjects cut at frames 45–250),
+//!   summed: sphere-mesh tracker 236.49 → 219.83 mm (63 cuts better, 6 worse, median −0.19
+//!   mm), with online calibration 233.83 → 226.07 mm (50 better, 9 worse), the Ch. 2
+//!   cylinders 425.15 → 406.03 mm (46 better, 15 worse);
+//! - the library's 16 ToF motions from frame 0 (all but `leave_reenter`), summed: sphere-mesh
+//!   17.31 → 13.54 mm, online calibration 20.65 → 18.79 mm, cylinders 32.89 → 31.55 mm;
+//! - noise-free sequences: unchanged (not smoothed).
+//!
+//! What it costs: the online estimate of the shape does not gain. On the six random subjects
+//! of issue 8 under ToF (`eval/tests/ch4_acceptance.rs`, `subject_ratios`) E_β ends at 0.31–0.42
+//! mm (0.30–0.42 raw), and since tracking with each subject's true template gains more, the
+//! ratio of online to true-template keypoint error rises from 1.31 / 1.10 / 1.05 / 1.36 / 1.13
+//! / 1.36 to 1.57 / 1.25 / 1.09 / 1.78 / 1.20 / 1.59. A 5×5 window smoothed more (ToF teaser
+//! 0.65 against 0.70 mm) but its curvature bias cost exact depth (0.19 → 0.35 mm), so the
+//! default radius is 1.
 
 use crate::image::{DepthImage, Mask};
 
