@@ -90,7 +90,7 @@ pub use lm::{
 };
 pub use loss::{
     placed_rotation, placement_directions, placement_hypotheses, placement_rotation, FrameStats,
-    LossParams, PLACEMENT_ROLLS, POOR_PLACEMENT_OUTSIDE,
+    LossParams, ARM_MIN_COSINE, PLACEMENT_ROLLS, POOR_PLACEMENT_OUTSIDE,
 };
 pub use normal_equations::{NormalEquations, TermStats};
 pub use pca::{
