@@ -214,8 +214,10 @@ fn calibrates_random_subjects_from_eight_tracked_frames() {
 
 /// The same with the ToF noise model (issue 6 "With ToF noise: report"): two subjects; the
 /// calibrated template must still be closer to the truth than the default, its radii within
-/// 0.75 mm. Measured (session 31): centers 5.55 → 2.35 and 2.63 → 1.98 mm, radii 0.26 → 0.31
-/// and 0.48 → 0.38 mm (2.40 / 2.05 and 0.42 / 0.40 mm when written, 2.51 / 2.05 and 0.41 / 0.40
+/// 0.75 mm. Measured (session 32, the depth smoothed from the calibration sequence's 31st frame,
+/// `sensor_io::preprocess::smooth_depth`): centers 5.55 → 2.00 and 2.63 → 1.40 mm, radii 0.26
+/// → 0.49 and 0.48 → 0.27 mm (on the raw depth, session 31: 2.35 / 1.98 mm, 0.31 / 0.38 mm;
+/// 2.40 / 2.05 and 0.42 / 0.40 mm when written, 2.51 / 2.05 and 0.41 / 0.40
 /// mm without the free sphere offsets of session 19;
 /// with the 5 mm along-ray slide before session 18: 2.40 / 2.34 mm, 0.47 / 0.61 mm),
 /// with the priors scaled by the measured noise (`CalibrationConfig::noise_scaled_priors`;

@@ -12,8 +12,9 @@
 //!
 //! Measured (300 frames at 30 Hz, last-third mean keypoint error): noise-free, default
 //! template 6.57 mm, online 3.12 mm, the hand's own model 0.24 mm (12.8×; E_β 1.98 → 1.62
-//! mm); ToF 6.64 / 3.84 / 1.55 mm (2.5×; 4.29 mm, 2.8×, with the shape-space prior scaled
-//! by σ̂² before session 20). Online, the fingertips come within 1–2 mm but the
+//! mm); ToF 6.59 / 3.53 / 0.81 mm (4.4×, E_β 1.98 → 1.34 mm) since session 32 smoothed the
+//! noisy depth, 6.64 / 3.84 / 1.55 mm (2.5×) on the raw depth (4.29 mm, 2.8×, with the
+//! shape-space prior scaled by σ̂² before session 20). Online, the fingertips come within 1–2 mm but the
 //! ring, middle and pinky knuckles (MCP keypoints) stay 6–9 mm off, mostly in depth, and the
 //! wrist 5 mm: the estimate keeps the knuckles' `base_z` at the template's and shrinks their
 //! radii instead (see `honline_calib`'s docs, "Another person's hand"). The offline
