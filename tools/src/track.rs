@@ -247,10 +247,10 @@ pub struct PreprocessArgs {
     /// Number of sensor points per frame (0 = every silhouette pixel).
     #[arg(long, default_value_t = 2500)]
     pub points: usize,
-    /// Radius (px) of the edge-aware smoothing of the hand's depth before its points are made
-    /// (beyond the thesis: `sensor_io::preprocess::smooth_depth`); 0: the raw depth, as the
-    /// thesis.
-    #[arg(long, default_value_t = 1)]
+    /// Radius (px, 0–5) of the edge-aware smoothing of noisy depth before its points are made
+    /// (beyond the thesis: `sensor_io::preprocess::smooth_depth`, from a sequence's 31st frame
+    /// once the measured noise is ≥ 1.5 mm); 0: the raw depth, as the thesis.
+    #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u32).range(0..=5))]
     pub smoothing: u32,
 }
 

@@ -505,6 +505,11 @@ fn track_rejects_bad_arguments_clearly() {
     assert!(!ok && text.contains("--model"), "{text}");
     let (ok, text) = hands(&["track", &s(&d), "--prior", "bogus", "--out", &s(&out)]);
     assert!(!ok && text.contains("--prior"), "{text}");
+    let (ok, text) = hands(&["track", &s(&d), "--smoothing", "9", "--out", &s(&out)]);
+    assert!(
+        !ok && text.contains("--smoothing") && text.contains("0..=5"),
+        "{text}"
+    );
     let corrupt = d.join("corrupt.mcap");
     std::fs::write(&corrupt, b"\x89MCAP0\r\ngarbage").expect("write");
     let (ok, text) = hands(&["track", &s(&corrupt), "--out", &s(&out)]);

@@ -357,11 +357,16 @@ mod tests {
         assert_eq!(fixed.for_noise(Some(10.0)), fixed);
     }
 
+    /// 50 points along image x (0–98 mm), a little spread in y.
+    fn cloud_along_x() -> Vec<Vector3<f64>> {
+        (0..50)
+            .map(|i| Vector3::new(f64::from(i) * 2.0, 0.5 * f64::from(i % 3), 400.0))
+            .collect()
+    }
+
     #[test]
     fn directions_follow_the_cloud() {
-        let pts: Vec<_> = (0..50)
-            .map(|i| Vector3::new(f64::from(i) * 2.0, 0.5 * f64::from(i % 3), 400.0))
-            .collect();
+        let pts = cloud_along_x();
         let (c, dirs) = placement_directions(&pts, None);
         assert!((c.x - 49.0).abs() < 1e-9);
         assert_eq!(dirs.len(), 3);
@@ -375,9 +380,7 @@ mod tests {
     /// or not finite changes nothing.
     #[test]
     fn the_forearm_rules_out_the_fingers_pointing_back_along_it() {
-        let pts: Vec<_> = (0..50)
-            .map(|i| Vector3::new(f64::from(i) * 2.0, 0.5 * f64::from(i % 3), 400.0))
-            .collect();
+        let pts = cloud_along_x();
         let (_, free) = placement_directions(&pts, None);
         let arm = Vector3::new(0.8, -0.3, 0.5).normalize();
         let (_, dirs) = placement_directions(&pts, Some(&arm));

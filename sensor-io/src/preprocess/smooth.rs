@@ -50,7 +50,8 @@ use crate::image::{DepthImage, Mask};
 /// Settings of [`smooth_depth`].
 #[derive(Copy, Clone, Debug, PartialEq)]
 pub struct SmoothParams {
-    /// Window radius (px): the window is `(2·radius + 1)²`; 0 leaves the depth as it is.
+    /// Window radius (px): the window is `(2·radius + 1)²`, and so is the cost a pixel; 0
+    /// leaves the depth as it is.
     pub radius: u32,
     /// Neighbours deeper or shallower than this (mm) are left out of a pixel's mean: more than
     /// the noise (a ToF pixel's ±3σ at 40 cm), less than a finger's depth step in front of the
