@@ -81,8 +81,9 @@ impl Default for SmoothParams {
 
 /// Smooths the depth of the pixels of `mask` (module docs) into `out`, in the depth image's
 /// units as `f64` (sub-unit means kept); pixels outside the mask or without depth get 0. `unit_mm`
-/// is the depth unit in mm (for `range`). A mask of another size than the depth, or a
-/// non-finite or non-positive unit, gives the depth unchanged.
+/// is the depth unit in mm (for `range`). A mask of another size than the depth (or images
+/// whose data do not fill their size), or a non-finite or non-positive unit, gives the depth
+/// unchanged.
 pub fn smooth_depth(
     depth: &DepthImage,
     mask: &Mask,
@@ -94,7 +95,10 @@ pub fn smooth_depth(
     out.clear();
     out.resize(depth.data.len(), 0.0);
     let member = |i: usize| mask.data[i] != 0 && depth.data[i] != 0;
-    let sized = mask.width == depth.width && mask.height == depth.height;
+    let sized = mask.width == depth.width
+        && mask.height == depth.height
+        && mask.data.len() == depth.data.len()
+        && depth.data.len() == w * h;
     if !(sized && unit_mm.is_finite() && unit_mm > 0.0) || params.radius == 0 {
         for (i, o) in out.iter_mut().enumerate() {
             if !sized || member(i) {
@@ -284,5 +288,15 @@ mod tests {
             &mut out,
         );
         assert!(out.iter().zip(&d.data).all(|(a, &b)| *a == f64::from(b)));
+        // Data shorter than the size says: no panic, the depth as it is.
+        let mut short = d.clone();
+        short.data.truncate(7);
+        let mask = full_mask(&d);
+        smooth_depth(&short, &mask, &SmoothParams::default(), 1.0, &mut out);
+        assert_eq!(out.len(), 7);
+        assert!(out
+            .iter()
+            .zip(&short.data)
+            .all(|(a, &b)| *a == f64::from(b)));
     }
 }
