@@ -21,8 +21,8 @@
 //! noisy data. When it applies ([`SmoothParams`]):
 //! - Only on noisy depth (`min_noise`, the along-ray switch's 1.5 mm): exact depth gains
 //!   nothing that can be told from chance. The sphere-mesh tracker's 64 noise-free cold starts,
-//!   smoothed from their 31st frame: 6 cuts better, 8 worse, median change −0.01 mm (116.60 →
-//!   104.24 mm summed, carried by one fast turn); from the first frame 158.27 mm (a fist lost).
+//!   smoothed from their 31st frame: 6 cuts better, 8 worse, median change −0.01 mm (105.36 →
+//!   104.24 mm summed); from the first frame 158.27 mm (a fist lost).
 //! - From a sequence's 31st frame (`after_frames`): smoothed from the first frame, fists placed
 //!   from afar stayed stuck where the raw depth let them converge (ToF `rotating_fist` from
 //!   frame 60, sphere-mesh tracker: 2.79 → 22.27 mm; from frame 165 7.71 → 33.60 mm), though
