@@ -17,27 +17,21 @@ use hand_model::cylinder::CylinderModel;
 use htrack_icp::{Tracker, TrackerConfig};
 
 fn track(noise: &str, frames: usize) -> SyntheticRun {
-    track_with(
-        noise,
-        frames,
-        TrackerConfig::default(),
-        SyntheticSpec::default(),
-    )
+    track_with(noise, frames, TrackerConfig::default(), true)
 }
 
-fn track_with(
-    noise: &str,
-    frames: usize,
-    config: TrackerConfig,
-    spec: SyntheticSpec,
-) -> SyntheticRun {
-    let smoothing = spec.preprocess.smoothing.is_some();
-    let mut seq = SyntheticSequence::new(SyntheticSpec {
+/// `smoothing`: the default preprocessing, or the raw depth (`PreprocessConfig::smoothing:
+/// None`).
+fn track_with(noise: &str, frames: usize, config: TrackerConfig, smoothing: bool) -> SyntheticRun {
+    let mut spec = SyntheticSpec {
         noise: noise.into(),
         frames,
-        ..spec
-    })
-    .unwrap();
+        ..SyntheticSpec::default()
+    };
+    if !smoothing {
+        spec.preprocess.smoothing = None;
+    }
+    let mut seq = SyntheticSequence::new(spec).unwrap();
     let model = CylinderModel::from_sphere_mesh_with_wrist(seq.template()).unwrap();
     let prior = hand_model::solver::PcaPrior::project_default();
     let gate = config.ray_gate;
@@ -80,8 +74,6 @@ fn teaser_tof_noise() {
         run.flag_fraction("lost")
     );
     assert!(s.mean < 8.0, "mean keypoint error {} mm", s.mean);
-    let mut raw = SyntheticSpec::default();
-    raw.preprocess.smoothing = None;
     let thesis = track_with(
         "tof",
         600,
@@ -89,7 +81,7 @@ fn teaser_tof_noise() {
             ray_gate: None,
             ..TrackerConfig::default()
         },
-        raw,
+        false,
     )
     .summary();
     assert!(
