@@ -592,7 +592,9 @@ fn subject_ratios() {
         let start = from_truth.then_some(truth.as_slice());
         let online = run_online(&s, &truth, start, &motion, config(Estimator::Iekf)).unwrap();
         let reference = run_true_template(&s, &truth, &motion, TrackerConfig::default()).unwrap();
-        let ratio = last_third_error(&online.run) / last_third_error(&reference);
+        let (with_online, with_truth) =
+            (last_third_error(&online.run), last_third_error(&reference));
+        let ratio = with_online / with_truth;
         let excess: Vec<f64> = last_third_keypoints(&online.run)
             .iter()
             .zip(last_third_keypoints(&reference))
@@ -614,7 +616,16 @@ fn subject_ratios() {
                 .0
             })
             .collect();
-        (ratio, online.end_error(), error, offset, excess, mid)
+        let millimetres = (with_online, with_truth);
+        (
+            ratio,
+            online.end_error(),
+            error,
+            offset,
+            excess,
+            mid,
+            millimetres,
+        )
     });
     let ratios: Vec<String> = runs.iter().map(|r| format!("{:.2}", r.0)).collect();
     let within = runs.iter().filter(|r| r.0 <= 1.10).count();
@@ -629,6 +640,14 @@ fn subject_ratios() {
         ratios.join(" / "),
         runs.len(),
         sxy / sxx
+    );
+    let millimetres: Vec<String> = runs
+        .iter()
+        .map(|r| format!("{:.2} / {:.2}", r.6 .0, r.6 .1))
+        .collect();
+    println!(
+        "  last-third keypoint error, online / true template (mm): {}",
+        millimetres.join(", ")
     );
     let excess: Vec<String> = (0..21)
         .map(|k| {

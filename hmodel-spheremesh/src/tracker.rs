@@ -12,9 +12,9 @@ use hand_model::solver::terms::{
     JointLimits, JointLimitsParams, PosePrior, PosePriorParams, Temporal, TemporalParams,
 };
 use hand_model::solver::{
-    placed_rotation, placement_hypotheses, sphere_mesh_points, timed_solve, EnergyTerm, FrameLoop,
-    FrameStats, Hypothesis, IrlsParams, LmError, LmOptions, LmSolver, LmWorkspace, LossParams,
-    NoTerm, PcaPrior, PriorSetup, SolveTiming, TrackingProblem,
+    digit_variants, placed_rotation, placement_hypotheses, sphere_mesh_points, timed_solve,
+    EnergyTerm, FrameLoop, FrameStats, Hypothesis, IrlsParams, LmError, LmOptions, LmSolver,
+    LmWorkspace, LossParams, NoTerm, PcaPrior, PriorSetup, SolveTiming, TrackingProblem,
 };
 use hand_model::spheremesh::{PosedSphereMesh, SphereMeshTemplate};
 use nalgebra::{Vector2, Vector3};
@@ -289,6 +289,10 @@ impl TrackingProblem for Problem<'_> {
 
     fn clear_history(&mut self) {
         self.terms.temporal.clear_history();
+    }
+
+    fn digit_variants(&self, pose: &Pose, digit: usize) -> Vec<Pose> {
+        digit_variants(&self.template.skeleton, pose, digit)
     }
 }
 

@@ -21,9 +21,9 @@ use hand_model::solver::terms::{
     JointLimits, JointLimitsParams, PosePrior, PosePriorParams, Temporal, TemporalParams,
 };
 use hand_model::solver::{
-    cylinder_points, placed_rotation, placement_hypotheses, timed_solve, EnergyTerm, FrameLoop,
-    FrameStats, Hypothesis, LmError, LmOptions, LmSolver, LmWorkspace, LossParams, NoTerm,
-    PcaPrior, PriorSetup, SolveTiming, TrackingProblem,
+    cylinder_points, digit_variants, placed_rotation, placement_hypotheses, timed_solve,
+    EnergyTerm, FrameLoop, FrameStats, Hypothesis, LmError, LmOptions, LmSolver, LmWorkspace,
+    LossParams, NoTerm, PcaPrior, PriorSetup, SolveTiming, TrackingProblem,
 };
 use nalgebra::{Vector2, Vector3};
 use sensor_io::preprocess::{gate_for_noise, slide_for_noise, NoiseMonitor, PreprocessedFrame};
@@ -317,6 +317,10 @@ impl TrackingProblem for Problem<'_> {
 
     fn clear_history(&mut self) {
         self.terms.temporal.clear_history();
+    }
+
+    fn digit_variants(&self, pose: &Pose, digit: usize) -> Vec<Pose> {
+        digit_variants(&self.ctx.model().skeleton, pose, digit)
     }
 }
 

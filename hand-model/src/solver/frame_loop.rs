@@ -1,7 +1,8 @@
 //! The per-frame control flow shared by the trackers (thesis §2.4 Fig. 2.3, §3.3): warm start
 //! from the previous frame, loss detection over a window of failed frames and re-initialization
 //! from several hypotheses ([`super::loss`]), looked at again a few frames later
-//! ([`RECHECK_FRAMES`]). The trackers provide the solve itself through
+//! ([`RECHECK_FRAMES`]), then each digit set to other flexions ([`super::digit_variants`]).
+//! The trackers provide the solve itself through
 //! [`TrackingProblem`]; this loop only decides which poses to solve from and which to keep.
 
 use super::loss::{FrameStats, LossParams};
@@ -40,6 +41,11 @@ pub trait TrackingProblem {
     }
     /// Forget the temporal history (after a re-initialization or a frame without a hand).
     fn clear_history(&mut self);
+    /// `pose` with digit `digit` (DESIGN.md order) set to other flexions, for the second look
+    /// at a placement ([`super::digit_variants`]); none by default.
+    fn digit_variants(&self, _pose: &Pose, _digit: usize) -> Vec<Pose> {
+        Vec::new()
+    }
 }
 
 /// A re-initialization start.
@@ -141,7 +147,10 @@ impl FrameLoop {
     /// otherwise be held through every frame until the hand is back). A failed solve keeps the
     /// previous pose (`solver_failed`); [`LossParams::window`] failed frames in a row
     /// re-initialize. [`RECHECK_FRAMES`] frames after a re-initialization its hypotheses are
-    /// tried again beside the tracked pose (flag `reinitialized` when one of them wins).
+    /// tried again beside the tracked pose, then the digit variants of the pose kept
+    /// ([`TrackingProblem::digit_variants`], solved aside; one that fits the frame better by
+    /// score and by mean distance replaces it, digit by digit; flag `reinitialized` when either
+    /// changed it).
     pub fn step(&mut self, problem: &mut impl TrackingProblem, num_points: usize) -> FrameOutcome {
         let mut out = FrameOutcome::default();
         if num_points < self.loss.min_points.max(1) {
@@ -181,7 +190,8 @@ impl FrameLoop {
             self.failed_run = 0;
         }
         if self.recheck_due(&out.flags) {
-            if let Some(better) = self.recheck(problem) {
+            let placed = self.recheck(problem);
+            if let Some(better) = self.refine_digits(problem).or(placed) {
                 // A new placement, as after the window's re-initialization.
                 out.flags.push("reinitialized");
                 self.failed_run = 0;
@@ -266,6 +276,42 @@ impl FrameLoop {
         Some(stats)
     }
 
+    /// The second look's digit search: each digit in turn set to each of its flexion
+    /// variants ([`TrackingProblem::digit_variants`]) of the current pose and solved aside;
+    /// a variant that is not a poor placement and beats the current pose both by
+    /// [`FrameStats::score`] and by the points' mean distance replaces it, and the next digit
+    /// starts from there. The problem is left at the chosen pose; the statistics are returned
+    /// (the history cleared) when the pose changed.
+    fn refine_digits(&mut self, problem: &mut impl TrackingProblem) -> Option<FrameStats> {
+        if !problem.refresh(&self.pose) {
+            return None;
+        }
+        let mut best = problem.frame_stats(&self.loss);
+        let mut changed = false;
+        for digit in 0..super::DIGITS {
+            for mut pose in problem.digit_variants(&self.pose, digit) {
+                if !problem.solve_aside(&mut pose) || !problem.refresh(&pose) {
+                    continue;
+                }
+                let stats = problem.frame_stats(&self.loss);
+                if problem.is_poor_placement(&stats)
+                    || stats.score() >= best.score()
+                    || stats.mean_distance >= best.mean_distance
+                {
+                    continue;
+                }
+                self.pose = pose;
+                best = stats;
+                changed = true;
+            }
+        }
+        if !problem.refresh(&self.pose) || !changed {
+            return None;
+        }
+        problem.clear_history();
+        Some(best)
+    }
+
     /// The best of `starts` solved by `solve` as (score, pose, poor placement): the backups
     /// only when the best of the others is a poor placement, and then only one that is not.
     fn best_start<P: TrackingProblem>(
@@ -315,6 +361,8 @@ mod tests {
         starts: Vec<(f64, bool)>,
         /// The share of the model outside the silhouette at a pose, from its offset.
         outside: fn(f64) -> f64,
+        /// Offsets from the target of digit 0's variants (the other digits have none).
+        variants: Vec<f64>,
     }
 
     impl Toy {
@@ -328,6 +376,7 @@ mod tests {
                 cleared: 0,
                 starts,
                 outside: |_| 0.0,
+                variants: Vec::new(),
             }
         }
     }
@@ -368,6 +417,15 @@ mod tests {
         }
         fn clear_history(&mut self) {
             self.cleared += 1;
+        }
+        fn digit_variants(&self, _pose: &Pose, digit: usize) -> Vec<Pose> {
+            let offsets = if digit == 0 { &self.variants[..] } else { &[] };
+            offsets
+                .iter()
+                .map(|o| Pose {
+                    values: vec![self.target + o],
+                })
+                .collect()
         }
     }
 
@@ -499,5 +557,37 @@ mod tests {
             assert_eq!(fl.pose.values[0], 2.0);
         }
         assert_eq!(toy.aside, 1, "looked at, and kept");
+    }
+
+    /// At the second look, a digit variant of the tracked pose that the solve takes to a
+    /// better fit replaces it (flag `reinitialized`, the history cleared); one that fits worse
+    /// leaves no trace.
+    #[test]
+    fn a_digit_variant_that_fits_better_replaces_the_tracked_pose() {
+        let mut fl = FrameLoop::new(Pose { values: vec![0.0] }, LossParams::default());
+        let mut toy = Toy::new(0.0, 3.0, vec![(4.0, false)]);
+        assert_eq!(fl.step(&mut toy, 500).flags, ["reinitialized"]);
+        assert_eq!(fl.pose.values[0], 4.0);
+        // The placement's start stays out of reach; a variant within reach.
+        toy.variants = vec![5.0, 2.0];
+        let cleared = toy.cleared;
+        for _ in 1..RECHECK_FRAMES {
+            assert!(fl.step(&mut toy, 500).flags.is_empty());
+        }
+        assert_eq!(fl.step(&mut toy, 500).flags, ["reinitialized"]);
+        assert_eq!(fl.pose.values[0], 0.0);
+        assert_eq!(toy.aside, 3, "the start and both variants, aside");
+        assert_eq!(toy.cleared, cleared + 1);
+        // A variant that fits worse: the tracked pose stays, the history too.
+        fl.set_pose(Pose { values: vec![4.0] });
+        fl.initialized = false;
+        assert_eq!(fl.step(&mut toy, 500).flags, ["reinitialized"]);
+        toy.variants = vec![6.0];
+        let cleared = toy.cleared;
+        for _ in 0..RECHECK_FRAMES {
+            assert!(fl.step(&mut toy, 500).flags.is_empty());
+            assert_eq!(fl.pose.values[0], 4.0);
+        }
+        assert_eq!(toy.cleared, cleared);
     }
 }

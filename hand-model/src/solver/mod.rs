@@ -67,6 +67,7 @@
 
 mod blocks;
 pub mod check;
+mod digits;
 mod frame_loop;
 mod irls;
 mod lm;
@@ -82,6 +83,7 @@ pub mod terms;
 mod tests;
 
 pub use blocks::{PackedBlocks, BLOCK_DOFS, MAX_BLOCKS};
+pub use digits::{digit_variants, DIGITS, DIGIT_FLEXION_LEVELS};
 pub use frame_loop::{FrameLoop, FrameOutcome, Hypothesis, TrackingProblem, RECHECK_FRAMES};
 pub use irls::IrlsParams;
 pub use lm::{
