@@ -1,5 +1,6 @@
 //! Per-digit flexion variants of a tracked pose (beyond the thesis), for the second look at a
-//! placement ([`super::FrameLoop`]). A re-initialization places the open mean pose; a digit
+//! placement and on a frame that fits much worse than the recent ones
+//! ([`super::FrameLoop::step`]). A re-initialization places the open mean pose; a digit
 //! that is curled in the data but was placed open can stay open, hidden behind a neighbour
 //! in the image (the model's silhouette then stays inside the sensor's, so E_m2d does not
 //! see it), while its own points are explained by the palm under it. The LM cannot leave
@@ -15,7 +16,7 @@
 //! | tracker | ToF | noise-free |
 //! |---|---|---|
 //! | Ch. 3 sphere-mesh | 238.03 → 157.67 mm (12 cuts better, 1 worse; cuts > 10 mm: 5 → 0) | 186.32 → 113.07 mm (10 better, 1 worse; 5 → 0) |
-//! | Ch. 2 cylinders | 471.18 → 396.88 mm (16 better, 4 worse; 14 → 8) | |
+//! | Ch. 2 cylinders | 471.18 → 396.88 mm (16 better, 4 worse; 14 → 8) | 485.70 → 410.80 mm (13 better, 6 worse; 15 → 11) |
 //!
 //! The five worst sphere-mesh cuts (random subjects, `crossing` from frame 165) all had one
 //! pair of neighbours exchanged (the index curled and the middle finger open where the data
