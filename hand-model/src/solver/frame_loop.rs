@@ -41,8 +41,9 @@ pub trait TrackingProblem {
     }
     /// Forget the temporal history (after a re-initialization or a frame without a hand).
     fn clear_history(&mut self);
-    /// `pose` with digit `digit` (DESIGN.md order) set to other flexions, for the second look
-    /// at a placement ([`super::digit_variants`]); none by default.
+    /// `pose` with digit `digit` (DESIGN.md order) set to other flexions, for the digit search
+    /// at the second look at a placement and on a frame that fits much worse than the recent
+    /// ones ([`super::digit_variants`]); none by default.
     fn digit_variants(&self, _pose: &Pose, _digit: usize) -> Vec<Pose> {
         Vec::new()
     }
@@ -284,6 +285,7 @@ impl FrameLoop {
         } else if self.scores.triggers(stats.score()) {
             if let Some(better) = self.refine_digits(problem) {
                 out.flags.push("reinitialized");
+                self.failed_run = 0;
                 stats = better;
             }
         }
@@ -366,7 +368,7 @@ impl FrameLoop {
         Some(stats)
     }
 
-    /// The second look's digit search: each digit in turn set to each of its flexion
+    /// The digit search (at the second look, or triggered by a jump of the score): each digit in turn set to each of its flexion
     /// variants ([`TrackingProblem::digit_variants`]) of the current pose and solved aside;
     /// a variant that is not a poor placement and beats the current pose both by
     /// [`FrameStats::score`] and by the points' mean distance replaces it, and the next digit
