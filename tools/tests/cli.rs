@@ -1111,20 +1111,6 @@ fn a_cold_start_with_two_fingers_exchanged_is_mended() {
         &s(&seq),
     ]);
     assert!(ok, "{text}");
-    let (ok, text) = hands(&[
-        "track",
-        &s(&seq),
-        "--model",
-        "spheremesh",
-        "--out",
-        &s(&d.join("t.jsonl")),
-    ]);
-    assert!(ok, "{text}");
-    let error: f64 = text
-        .split("mean keypoint error ")
-        .nth(1)
-        .and_then(|t| t.split_whitespace().next())
-        .and_then(|v| v.parse().ok())
-        .unwrap_or_else(|| panic!("no keypoint error in {text}"));
-    assert!(error < 12.0, "mean keypoint error {error} mm: {text}");
+    let error = keypoint_error(&seq, None, &d);
+    assert!(error < 12.0, "mean keypoint error {error} mm");
 }
