@@ -410,6 +410,73 @@ impl<'m> Tracker<'m> {
         Ok(())
     }
 
+    /// The along-ray registration and the loss criterion for depth noise `sigma` (mm; `None`:
+    /// not measured).
+    fn set_noise(&mut self, sigma: Option<f64>) {
+        let ctx = &mut self.problem.ctx;
+        ctx.set_ray_gate(self.config.ray_gate_for(sigma));
+        ctx.set_ray_slide(self.config.ray_slide_for(sigma));
+        self.frames.set_noise(sigma);
+    }
+
+    /// Load `frame` with depth noise `sigma` for a search from `poses`; false when the frame
+    /// has too few points or a pose is not this skeleton's.
+    fn load_aside(
+        &mut self,
+        frame: &PreprocessedFrame,
+        poses: &[&Pose],
+        sigma: Option<f64>,
+    ) -> bool {
+        let nd = self.template.skeleton.num_dofs();
+        if frame.points.len() < self.frames.loss().min_points.max(1)
+            || poses.iter().any(|p| p.values.len() != nd)
+        {
+            return false;
+        }
+        self.problem.ctx.set_frame(frame);
+        self.set_noise(sigma);
+        true
+    }
+
+    /// The digit search of the frame loop ([`FrameLoop::search_digits`]) from `pose` on
+    /// `frame`, for a caller that drives its own loop: the online calibrator, whose solve moves
+    /// the shape too, has its fingers looked at by a tracker of its current template, which the
+    /// search then holds fixed. `sigma` is the depth noise the caller measured (mm; `None`: not
+    /// measured); it sets the along-ray registration and the loss criterion as in
+    /// [`Self::track`]. Returns the better pose and its statistics, or `None` when no variant
+    /// fits the frame better (or the frame has too few points, or `pose` is not this skeleton's). The tracker
+    /// continues from the pose returned.
+    pub fn search_digits(
+        &mut self,
+        frame: &PreprocessedFrame,
+        pose: &Pose,
+        sigma: Option<f64>,
+    ) -> Option<(Pose, FrameStats)> {
+        if !self.load_aside(frame, &[pose], sigma) {
+            return None;
+        }
+        self.frames.search_digits(&mut self.problem, pose.clone())
+    }
+
+    /// [`FrameLoop::challenge`] on `frame`: whether `candidate`, a pose the digit search found
+    /// on an earlier frame, solved on this one still fits better than `tracked` (the caller's
+    /// pose for this frame); the solved candidate and its statistics when it does. `sigma` as in
+    /// [`Self::search_digits`]. `None` too when the frame has too few points or a pose is not
+    /// this skeleton's.
+    pub fn challenge(
+        &mut self,
+        frame: &PreprocessedFrame,
+        tracked: &Pose,
+        candidate: &Pose,
+        sigma: Option<f64>,
+    ) -> Option<(Pose, FrameStats)> {
+        if !self.load_aside(frame, &[tracked, candidate], sigma) {
+            return None;
+        }
+        self.frames
+            .challenge(&mut self.problem, tracked, candidate.clone())
+    }
+
     /// Track one preprocessed frame and return its DESIGN.md record (pose by DOF name, 21
     /// keypoints, per-term energies of the last linearization, iterations, per-stage µs,
     /// flags `no_hand`, `lost`, `reinitialized`, `solver_failed`). Never returns a non-finite
@@ -423,13 +490,7 @@ impl<'m> Tracker<'m> {
         if n >= self.frames.loss().min_points.max(1) {
             self.problem.ctx.set_frame(frame);
             if self.noise.observe(&frame.depth, &frame.hand.mask) {
-                let sigma = self.noise.sigma();
-                self.problem
-                    .ctx
-                    .set_ray_gate(self.config.ray_gate_for(sigma));
-                let slide = self.config.ray_slide_for(sigma);
-                self.problem.ctx.set_ray_slide(slide);
-                self.frames.set_noise(sigma);
+                self.set_noise(self.noise.sigma());
             }
         }
         let outcome = self.frames.step(&mut self.problem, n);

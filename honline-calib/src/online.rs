@@ -7,7 +7,7 @@ use hand_model::kinematics::Pose;
 use hand_model::solver::terms::Temporal;
 use hand_model::solver::{
     sphere_mesh_points, EnergyTerm, FrameStats, IterInfo, LmCallback, LmError, LmSolver,
-    LmWorkspace, NormalEquations, PcaPrior, TermError,
+    LmWorkspace, NormalEquations, PcaPrior, ScoreTrigger, TermError, CONFIRM_FRAMES,
 };
 use hand_model::spheremesh::{PosedSphereMesh, ShapeBasis, SphereMeshTemplate};
 use hand_model::ModelError;
@@ -415,6 +415,11 @@ pub struct OnlineCalibrator<'m> {
     seed: Option<hmodel_spheremesh::Tracker<'m>>,
     /// `Some` while the seed, having placed the hand, tracks beside the calibrator.
     shadow: Option<Shadow>,
+    /// The recent frames' scores, which trigger the digit search
+    /// ([`OnlineCalibrator::mend_digits`]).
+    scores: ScoreTrigger,
+    /// The digit search's candidate pose and the frames it has fitted better.
+    candidate: Option<(Pose, usize)>,
 }
 
 impl<'m> OnlineCalibrator<'m> {
@@ -463,6 +468,8 @@ impl<'m> OnlineCalibrator<'m> {
             start: base,
             seed: None,
             shadow: None,
+            scores: ScoreTrigger::new(),
+            candidate: None,
             ctx,
             solver,
             ws,
@@ -703,6 +710,54 @@ impl<'m> OnlineCalibrator<'m> {
         false
     }
 
+    /// The digit search during tracking ([`hand_model::solver::FrameLoop::search_digits`]),
+    /// triggered as the Ch. 3 tracker's by a frame that fits much worse than the recent ones
+    /// ([`ScoreTrigger`]): two fingers exchanged leave the model outside the silhouette where
+    /// the wrong one lies, a minimum the joint solve does not leave. A Ch. 3 tracker of the
+    /// current template solves each digit's variants with the shape held fixed. A variant that
+    /// fits the frame better becomes a candidate, which replaces `pose` only once it has also
+    /// fitted the next [`CONFIRM_FRAMES`] − 1 frames better
+    /// ([`hand_model::solver::FrameLoop::challenge`]); its statistics are returned then, and
+    /// the caller treats the frame as a new placement whose shape step is refused.
+    fn mend_digits(
+        &mut self,
+        frame: &PreprocessedFrame,
+        fit: &FrameStats,
+        pose: &mut Pose,
+    ) -> Option<FrameStats> {
+        let sigma = self.noise.sigma();
+        let ((candidate, stats), wins) = match self.candidate.take() {
+            Some((c, wins)) => (
+                self.searcher(|t| t.challenge(frame, pose, &c, sigma))?,
+                wins + 1,
+            ),
+            None => {
+                if !self.scores.triggers(fit.score()) {
+                    return None;
+                }
+                (self.searcher(|t| t.search_digits(frame, pose, sigma))?, 1)
+            }
+        };
+        if wins < CONFIRM_FRAMES {
+            self.candidate = Some((candidate, wins));
+            return None;
+        }
+        *pose = candidate;
+        Some(stats)
+    }
+
+    /// `f` on a Ch. 3 tracker of the current template, built for it.
+    fn searcher<R>(
+        &self,
+        f: impl FnOnce(&mut hmodel_spheremesh::Tracker<'_>) -> Option<R>,
+    ) -> Option<R> {
+        let template = self.ctx.tracking.template().clone();
+        let config = self.config.tracker.clone();
+        let mut tracker =
+            hmodel_spheremesh::Tracker::new(&template, config, self.prior.as_ref()).ok()?;
+        f(&mut tracker)
+    }
+
     /// The mean pose moved so that the model's sphere centroid sits 10 mm behind the points'
     /// centroid.
     fn centered_pose(&self, points: &[Vector3<f64>]) -> Pose {
@@ -777,6 +832,10 @@ impl<'m> OnlineCalibrator<'m> {
     pub fn track(&mut self, frame: &PreprocessedFrame, index: u64, timestamp: f64) -> OnlineFrame {
         let start = Instant::now();
         let (placed, settling) = self.seed_frame(frame, index, timestamp);
+        if placed {
+            self.scores.clear();
+            self.candidate = None;
+        }
         let seed_us = start.elapsed().as_secs_f64() * 1e6;
         let watched = self.seed.is_some();
         let mut out = self.solve(frame, index, timestamp, settling);
@@ -789,6 +848,8 @@ impl<'m> OnlineCalibrator<'m> {
             timing.insert("track".into(), start.elapsed().as_secs_f64() * 1e6);
         }
         if self.watch() {
+            self.scores.clear();
+            self.candidate = None;
             out.record.flags.push("shape_reset".into());
         }
         // As the trackers' frame loop: a hand that comes back is placed again, not solved from
@@ -897,15 +958,39 @@ impl<'m> OnlineCalibrator<'m> {
                 self.problem.data.capture_next(false);
                 // The loss criterion at the measured depth noise.
                 let loss = self.config.tracker.loss.for_noise(self.noise.sigma());
-                let fit = self.ctx.tracking.frame_stats(&loss);
+                let mut fit = self.ctx.tracking.frame_stats(&loss);
                 let lost = measured && self.note_loss(&fit);
+                let mended = match (measured && !lost)
+                    .then(|| self.mend_digits(frame, &fit, &mut pose))
+                    .flatten()
+                {
+                    Some(at_mended) => {
+                        fit = at_mended;
+                        true
+                    }
+                    None => false,
+                };
                 let rejected = measured
-                    && (lost || self.outside_rejects(fit.outside) || self.innovation_rejects());
+                    && (lost
+                        || mended
+                        || self.outside_rejects(fit.outside)
+                        || self.innovation_rejects());
+                if mended {
+                    // A new placement: the frames before fitted other fingers, and this
+                    // frame's shape step was taken with them.
+                    rec.flags.push("reinitialized".into());
+                    self.scores.clear();
+                    self.temporal.clear_history();
+                } else if !lost {
+                    self.scores.push(fit.score());
+                }
                 if rejected {
                     (self.ctx.beta, self.ctx.latent) = saved.clone();
                     self.ctx.dirty = true;
-                    rec.flags
-                        .push(if lost { "lost" } else { "shape_rejected" }.into());
+                    if !mended {
+                        rec.flags
+                            .push(if lost { "lost" } else { "shape_rejected" }.into());
+                    }
                 }
                 stats = Some(fit);
                 if !measured {

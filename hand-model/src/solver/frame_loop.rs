@@ -1,8 +1,9 @@
 //! The per-frame control flow shared by the trackers (thesis §2.4 Fig. 2.3, §3.3): warm start
 //! from the previous frame, loss detection over a window of failed frames and re-initialization
 //! from several hypotheses ([`super::loss`]), looked at again a few frames later
-//! ([`RECHECK_FRAMES`]), then each digit set to other flexions ([`super::digit_variants`]).
-//! The trackers provide the solve itself through
+//! ([`RECHECK_FRAMES`]), then each digit set to other flexions ([`super::digit_variants`]),
+//! which also runs, confirmed over a few frames ([`CONFIRM_FRAMES`]), on a frame that fits much
+//! worse than the recent ones ([`ScoreTrigger`]). The trackers provide the solve itself through
 //! [`TrackingProblem`]; this loop only decides which poses to solve from and which to keep.
 
 use super::loss::{FrameStats, LossParams};
@@ -88,7 +89,10 @@ pub struct FrameLoop {
     /// Frames until the placement of the last re-initialization is looked at again.
     recheck_in: Option<usize>,
     /// The recent frames' scores, which trigger the digit search.
-    scores: ScoreWindow,
+    scores: ScoreTrigger,
+    /// The triggered digit search's candidate pose and the frames it has fitted better
+    /// ([`FrameLoop::confirm_digits`]).
+    candidate: Option<(Pose, usize)>,
 }
 
 /// Frames whose scores ([`FrameStats::score`]) the digit search's trigger compares a frame
@@ -116,17 +120,28 @@ const SCORE_RATIO: f64 = 1.3;
 /// worth, and a failure it did not mend would otherwise pay that on every frame.
 const DIGIT_COOLDOWN: usize = 30;
 
-/// The last [`SCORE_WINDOW`] scores, and the cooldown of the digit search they trigger.
+/// The trigger of the digit search during tracking: the last 60 frames'
+/// scores ([`FrameStats::score`]) and the cooldown. A frame whose score exceeds 1.3 times their
+/// median (once 30 are in) triggers it, at most once in 30 frames. [`FrameLoop::step`] holds
+/// one; a tracker with a frame loop of its own (online calibration) holds its own and runs the
+/// search through [`FrameLoop::search_digits`].
 #[derive(Clone, Debug)]
-struct ScoreWindow {
+pub struct ScoreTrigger {
     scores: [f64; SCORE_WINDOW],
     len: usize,
     next: usize,
     cooldown: usize,
 }
 
-impl ScoreWindow {
-    fn new() -> Self {
+impl Default for ScoreTrigger {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+impl ScoreTrigger {
+    /// An empty window.
+    pub fn new() -> Self {
         Self {
             scores: [0.0; SCORE_WINDOW],
             len: 0,
@@ -135,11 +150,13 @@ impl ScoreWindow {
         }
     }
 
-    fn clear(&mut self) {
+    /// Forget the scores (after a new placement: the frames before it fitted another pose).
+    pub fn clear(&mut self) {
         (self.len, self.next) = (0, 0);
     }
 
-    fn push(&mut self, score: f64) {
+    /// Add the score of a frame that was not lost (non-finite scores are ignored).
+    pub fn push(&mut self, score: f64) {
         if score.is_finite() {
             self.scores[self.next] = score;
             self.next = (self.next + 1) % SCORE_WINDOW;
@@ -147,8 +164,9 @@ impl ScoreWindow {
         }
     }
 
-    /// Whether `score` triggers the digit search (which starts the cooldown).
-    fn triggers(&mut self, score: f64) -> bool {
+    /// Whether `score` triggers the digit search (which starts the cooldown); call it once a
+    /// frame, before [`Self::push`]ing the frame's score.
+    pub fn triggers(&mut self, score: f64) -> bool {
         if self.cooldown > 0 {
             self.cooldown -= 1;
             return false;
@@ -166,6 +184,13 @@ impl ScoreWindow {
         due
     }
 }
+
+/// Frames in a row that a pose found by the digit search during tracking must fit better
+/// than the tracked pose before it replaces it ([`FrameLoop::challenge`]): the frame that
+/// triggered the search and the next two. Crossed index and middle fingers seen in depth fit
+/// one frame better with the fingers exchanged, while the hand is still recovering from a
+/// failure.
+pub const CONFIRM_FRAMES: usize = 3;
 
 /// A re-initialization places the hand on what it sees of it, which is often the first fingers
 /// of a hand entering the view, or part of a hand after a fast motion: this many frames later
@@ -193,7 +218,8 @@ impl FrameLoop {
             failed_run: 0,
             has_fitted: false,
             recheck_in: None,
-            scores: ScoreWindow::new(),
+            scores: ScoreTrigger::new(),
+            candidate: None,
         }
     }
 
@@ -211,6 +237,7 @@ impl FrameLoop {
     /// Continue from `pose` at the next frame instead of re-initializing.
     pub fn set_pose(&mut self, pose: Pose) {
         self.pose = pose;
+        self.candidate = None;
         self.initialized = true;
         self.failed_run = 0;
     }
@@ -230,9 +257,11 @@ impl FrameLoop {
     /// tried again beside the tracked pose, then the digit variants of the pose kept
     /// ([`TrackingProblem::digit_variants`], solved aside; one that fits the frame better by
     /// score and by mean distance replaces it, digit by digit; flag `reinitialized` when either
-    /// changed it). The same digit search runs on a tracked frame whose score
+    /// changed it). The variants must beat the tracked pose also when it is solved once more
+    /// aside. The same digit search runs on a tracked frame whose score
     /// ([`FrameStats::score`]) exceeds 1.3 times the median of the last 60 frames' (once 30 are
-    /// in), at most once in 30 frames.
+    /// in), at most once in 30 frames; its better pose replaces the tracked one only after it
+    /// has fitted [`CONFIRM_FRAMES`] frames in a row better ([`Self::challenge`]).
     pub fn step(&mut self, problem: &mut impl TrackingProblem, num_points: usize) -> FrameOutcome {
         let mut out = FrameOutcome::default();
         if num_points < self.loss.min_points.max(1) {
@@ -243,6 +272,7 @@ impl FrameLoop {
             self.initialized = false;
             self.failed_run = 0;
             self.recheck_in = None;
+            self.candidate = None;
             problem.clear_history();
             return out;
         }
@@ -273,7 +303,11 @@ impl FrameLoop {
         }
         if self.recheck_due(&out.flags) {
             let placed = self.recheck(problem);
-            if let Some(better) = self.refine_digits(problem).or(placed) {
+            let digits = self.refine_digits(problem);
+            if digits.is_some() {
+                problem.clear_history();
+            }
+            if let Some(better) = digits.or(placed) {
                 // A new placement, as after the window's re-initialization.
                 out.flags.push("reinitialized");
                 self.failed_run = 0;
@@ -282,12 +316,11 @@ impl FrameLoop {
         }
         if out.flags.contains(&"reinitialized") {
             self.scores.clear();
-        } else if self.scores.triggers(stats.score()) {
-            if let Some(better) = self.refine_digits(problem) {
-                out.flags.push("reinitialized");
-                self.failed_run = 0;
-                stats = better;
-            }
+            self.candidate = None;
+        } else if let Some(better) = self.confirm_digits(problem, &stats) {
+            out.flags.push("reinitialized");
+            self.failed_run = 0;
+            stats = better;
         }
         if stats.failed {
             out.flags.push("lost");
@@ -378,30 +411,131 @@ impl FrameLoop {
         if !problem.refresh(&self.pose) {
             return None;
         }
-        let mut best = problem.frame_stats(&self.loss);
-        let mut changed = false;
+        let tracked = problem.frame_stats(&self.loss);
+        let mut bar = (tracked.score(), tracked.mean_distance);
+        let beats = |s: &FrameStats, bar: (f64, f64)| s.score() < bar.0 && s.mean_distance < bar.1;
+        let mut resolved = false;
+        let mut best = None;
         for digit in 0..super::DIGITS {
             for mut pose in problem.digit_variants(&self.pose, digit) {
                 if !problem.solve_aside(&mut pose) || !problem.refresh(&pose) {
                     continue;
                 }
                 let stats = problem.frame_stats(&self.loss);
-                if problem.is_poor_placement(&stats)
-                    || stats.score() >= best.score()
-                    || stats.mean_distance >= best.mean_distance
-                {
+                if problem.is_poor_placement(&stats) || !beats(&stats, bar) {
                     continue;
                 }
+                // Before the first win, the bar becomes the better (by each measure) of the
+                // tracked pose and that pose solved aside as the variants are: a pose still
+                // converging (a hand recovering from a failure) would otherwise lose to a
+                // variant by the variant's extra solve alone.
+                if !resolved {
+                    resolved = true;
+                    self.lower_bar(problem, &self.pose.clone(), &mut bar);
+                    if !beats(&stats, bar) {
+                        continue;
+                    }
+                }
                 self.pose = pose;
-                best = stats;
-                changed = true;
+                bar = (stats.score(), stats.mean_distance);
+                best = Some(stats);
             }
         }
-        if !problem.refresh(&self.pose) || !changed {
+        if !problem.refresh(&self.pose) {
             return None;
         }
+        best
+    }
+
+    /// Lower `bar` (score, mean distance) to those of `pose` solved aside, by each measure
+    /// where it does better.
+    fn lower_bar(&self, problem: &mut impl TrackingProblem, pose: &Pose, bar: &mut (f64, f64)) {
+        let mut again = pose.clone();
+        if problem.solve_aside(&mut again) && problem.refresh(&again) {
+            let s = problem.frame_stats(&self.loss);
+            *bar = (bar.0.min(s.score()), bar.1.min(s.mean_distance));
+        }
+    }
+
+    /// The digit search during tracking, confirmed: a frame that triggers it
+    /// ([`ScoreTrigger`]) makes the search's better pose a candidate, which replaces the
+    /// tracked pose (its statistics returned, the history cleared) only once it has also
+    /// fitted the next [`CONFIRM_FRAMES`] − 1 frames better ([`Self::challenge`]); one frame
+    /// where it does not drops it. The problem is left at the pose kept.
+    fn confirm_digits(
+        &mut self,
+        problem: &mut impl TrackingProblem,
+        stats: &FrameStats,
+    ) -> Option<FrameStats> {
+        let tracked = self.pose.clone();
+        let (candidate, wins) = match self.candidate.take() {
+            Some((c, wins)) => (self.challenge(problem, &tracked, c)?.0, wins + 1),
+            None => {
+                if !self.scores.triggers(stats.score()) {
+                    return None;
+                }
+                self.refine_digits(problem)?;
+                (std::mem::replace(&mut self.pose, tracked), 1)
+            }
+        };
+        if wins < CONFIRM_FRAMES {
+            self.candidate = Some((candidate, wins));
+            let _ = problem.refresh(&self.pose);
+            return None;
+        }
+        if !problem.refresh(&candidate) {
+            let _ = problem.refresh(&self.pose);
+            return None;
+        }
+        self.pose = candidate;
         problem.clear_history();
-        Some(best)
+        Some(problem.frame_stats(&self.loss))
+    }
+
+    /// Whether `candidate` (a pose the digit search found on an earlier frame), solved aside
+    /// on the frame the problem holds, still fits it better than `tracked` by the search's
+    /// rule: not a poor placement, and better by score and by mean distance than `tracked` as
+    /// it is and solved aside. Returns the solved candidate and its statistics, the problem
+    /// left there, when it does; `None` leaves the problem at `tracked`. The loop's pose and
+    /// the history do not change.
+    pub fn challenge(
+        &self,
+        problem: &mut impl TrackingProblem,
+        tracked: &Pose,
+        mut candidate: Pose,
+    ) -> Option<(Pose, FrameStats)> {
+        if !problem.refresh(tracked) {
+            return None;
+        }
+        let s = problem.frame_stats(&self.loss);
+        let mut bar = (s.score(), s.mean_distance);
+        self.lower_bar(problem, tracked, &mut bar);
+        let won = problem.solve_aside(&mut candidate) && problem.refresh(&candidate) && {
+            let s = problem.frame_stats(&self.loss);
+            !problem.is_poor_placement(&s) && s.score() < bar.0 && s.mean_distance < bar.1
+        };
+        if !won {
+            let _ = problem.refresh(tracked);
+            return None;
+        }
+        let stats = problem.frame_stats(&self.loss);
+        Some((candidate, stats))
+    }
+
+    /// The digit search of [`Self::step`] on its own, from `pose` on the frame the problem
+    /// holds: the pose of a tracker that drives its own loop (online calibration) and wants
+    /// its fingers looked at with a problem built for that. Returns the better pose and its
+    /// statistics when a variant replaced one of its digits, and `None` (nothing better) when
+    /// none did; the loop then continues from the pose returned, if any (history cleared).
+    pub fn search_digits(
+        &mut self,
+        problem: &mut impl TrackingProblem,
+        pose: Pose,
+    ) -> Option<(Pose, FrameStats)> {
+        self.set_pose(pose);
+        let stats = self.refine_digits(problem)?;
+        problem.clear_history();
+        Some((self.pose.clone(), stats))
     }
 
     /// The best of `starts` solved by `solve` as (score, pose, poor placement): the backups
@@ -668,7 +802,10 @@ mod tests {
         }
         assert_eq!(fl.step(&mut toy, 500).flags, ["reinitialized"]);
         assert_eq!(fl.pose.values[0], 0.0);
-        assert_eq!(toy.aside, 3, "the start and both variants, aside");
+        assert_eq!(
+            toy.aside, 4,
+            "the start, both variants and the tracked pose once more, aside"
+        );
         assert_eq!(toy.cleared, cleared + 1);
         // A variant that fits worse: the tracked pose stays, the history too.
         fl.set_pose(Pose { values: vec![4.0] });
@@ -683,8 +820,9 @@ mod tests {
         assert_eq!(toy.cleared, cleared);
     }
 
-    /// A tracked frame that fits much worse than the recent ones triggers the digit search,
-    /// which mends it; the next jump within the cooldown does not.
+    /// A tracked frame that fits much worse than the recent ones triggers the digit search;
+    /// its better pose replaces the tracked one once it has fitted [`CONFIRM_FRAMES`] frames
+    /// better; the next jump within the cooldown does not search.
     #[test]
     fn a_jump_of_the_score_triggers_the_digit_search() {
         let mut fl = FrameLoop::new(Pose { values: vec![0.0] }, LossParams::default());
@@ -697,13 +835,59 @@ mod tests {
         // The data move beyond the solve's reach: the tracked pose fits 3 mm off.
         toy.target = 3.0;
         let aside = toy.aside;
+        for n in 1..CONFIRM_FRAMES {
+            assert!(fl.step(&mut toy, 500).flags.is_empty(), "frame {n}");
+            assert_eq!(fl.pose.values[0], 0.0, "a candidate, not yet confirmed");
+        }
         assert_eq!(fl.step(&mut toy, 500).flags, ["reinitialized"]);
         assert_eq!(fl.pose.values[0], 3.0, "the variant near the data won");
-        assert_eq!(toy.aside, aside + 1);
+        // Each frame: the candidate (the variant) and the tracked pose, solved aside.
+        assert_eq!(toy.aside, aside + 2 * CONFIRM_FRAMES);
         // Again, within the cooldown: no search, the pose stays off.
         toy.target = 6.0;
         assert!(fl.step(&mut toy, 500).flags.is_empty());
-        assert_eq!(toy.aside, aside + 1);
+        assert_eq!(toy.aside, aside + 2 * CONFIRM_FRAMES);
         assert_eq!(fl.pose.values[0], 3.0);
+    }
+
+    /// A candidate of the triggered digit search that fits the next frame worse than the
+    /// tracked pose is dropped: the data jumped for one frame and came back.
+    #[test]
+    fn a_candidate_that_loses_a_frame_is_dropped() {
+        let mut fl = FrameLoop::new(Pose { values: vec![0.0] }, LossParams::default());
+        let mut toy = Toy::new(0.0, 0.5, vec![(0.2, false)]);
+        toy.variants = vec![0.2];
+        for _ in 0..SCORE_WINDOW {
+            fl.step(&mut toy, 500);
+        }
+        toy.target = 3.0;
+        assert!(fl.step(&mut toy, 500).flags.is_empty());
+        assert!(fl.candidate.is_some());
+        toy.target = 0.0;
+        assert!(fl.step(&mut toy, 500).flags.is_empty());
+        assert!(fl.candidate.is_none());
+        assert_eq!(fl.pose.values[0], 0.0);
+    }
+
+    /// [`FrameLoop::search_digits`] on its own: a variant that fits better than the tracked
+    /// pose replaces it only when it also beats that pose solved once more, so a pose still
+    /// converging is not taken over by a variant's extra solve.
+    #[test]
+    fn a_variant_must_beat_the_tracked_pose_solved_again() {
+        let mut fl = FrameLoop::new(Pose { values: vec![0.0] }, LossParams::default());
+        let mut toy = Toy::new(0.0, 3.0, Vec::new());
+        toy.variants = vec![0.2];
+        // Within the solve's reach of the data: solved again, the tracked pose fits as well.
+        assert_eq!(fl.search_digits(&mut toy, Pose { values: vec![1.5] }), None);
+        assert_eq!(fl.pose.values[0], 1.5);
+        assert_eq!(toy.aside, 2);
+        // Out of it: the variant wins.
+        toy.reach = 1.0;
+        let (pose, stats) = fl
+            .search_digits(&mut toy, Pose { values: vec![1.5] })
+            .expect("the variant fits better");
+        assert_eq!((pose.values[0], fl.pose.values[0]), (0.0, 0.0));
+        assert_eq!(stats.mean_distance, 0.0);
+        assert_eq!(toy.cleared, 1);
     }
 }

@@ -84,7 +84,10 @@ mod tests;
 
 pub use blocks::{PackedBlocks, BLOCK_DOFS, MAX_BLOCKS};
 pub use digits::{digit_variants, DIGITS, DIGIT_FLEXION_LEVELS};
-pub use frame_loop::{FrameLoop, FrameOutcome, Hypothesis, TrackingProblem, RECHECK_FRAMES};
+pub use frame_loop::{
+    FrameLoop, FrameOutcome, Hypothesis, ScoreTrigger, TrackingProblem, CONFIRM_FRAMES,
+    RECHECK_FRAMES,
+};
 pub use irls::IrlsParams;
 pub use lm::{
     callback_fn, FnCallback, IterInfo, LmCallback, LmError, LmOptions, LmReport, LmSolver,
