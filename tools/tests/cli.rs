@@ -821,15 +821,21 @@ fn bench_rejects_bad_arguments_clearly() {
 /// sequence's ground truth (the track is written into `dir`).
 fn keypoint_error(seq: &std::path::Path, template: Option<&PathBuf>, dir: &std::path::Path) -> f64 {
     let s = |p: &std::path::Path| p.to_str().expect("utf8").to_string();
+    let extra = template.map_or_else(Vec::new, |t| vec!["--template".to_string(), s(t)]);
+    track_error(seq, &extra, dir)
+}
+
+/// `hands track <seq> --model spheremesh <extra…>`'s mean keypoint error (mm) against the
+/// sequence's ground truth (the track is written into `dir`).
+fn track_error(seq: &std::path::Path, extra: &[String], dir: &std::path::Path) -> f64 {
+    let s = |p: &std::path::Path| p.to_str().expect("utf8").to_string();
     let mut args = vec![
         "track".to_string(),
         s(seq),
         "--model".into(),
         "spheremesh".into(),
     ];
-    if let Some(t) = template {
-        args.extend(["--template".into(), s(t)]);
-    }
+    args.extend_from_slice(extra);
     args.extend(["--out".into(), s(&dir.join("t.jsonl"))]);
     let refs: Vec<&str> = args.iter().map(String::as_str).collect();
     let (ok, text) = hands(&refs);
@@ -1113,4 +1119,26 @@ fn a_cold_start_with_two_fingers_exchanged_is_mended() {
     assert!(ok, "{text}");
     let error = keypoint_error(&seq, None, &d);
     assert!(error < 12.0, "mean keypoint error {error} mm");
+}
+
+/// Online calibration's own digit search during tracking (a frame that fits much worse than the
+/// recent ones, the better pose confirmed over three frames): on the library's noise-free
+/// `axis_interaction` (seed 7, 19 s), where the fingers' contacts leave two of them exchanged.
+/// Measured: 0.72 mm mean keypoint error, 97.5 % of the frames with every keypoint within 25 mm
+/// (without the search: 3.85 mm, 71.6 %).
+#[test]
+fn online_calibration_mends_fingers_exchanged_mid_sequence() {
+    let d = tmp("online-digits");
+    let seq = d.join("seq");
+    let (ok, text) = hands(&[
+        "synth",
+        "--motion",
+        "axis_interaction",
+        "--out",
+        seq.to_str().expect("utf8"),
+    ]);
+    assert!(ok, "{text}");
+    let online = ["--calibrate".to_string(), "online".to_string()];
+    let error = track_error(&seq, &online, &d);
+    assert!(error < 2.0, "mean keypoint error {error} mm");
 }
