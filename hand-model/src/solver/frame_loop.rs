@@ -104,8 +104,9 @@ const SCORE_WINDOW: usize = 60;
 /// model sticking out of the silhouette where the wrong one lies: on the library's ToF
 /// `axis_interaction` (sphere-mesh tracker) the share outside rose from ≈ 0.04 to 0.06–0.15 and
 /// the points' mean distance from ≈ 1.5 to 1.8–3.5 mm, for 300 frames at 15 mm mean keypoint
-/// error. Measured (the library's 16 motions of the default hand, but `leave_reenter`, from
-/// frame 0; mean keypoint error summed, without → with the trigger), sphere-mesh: ToF 22.43 →
+/// error. Measured in session 33, the search's pose adopted at once (the library's 16 motions
+/// of the default hand, but `leave_reenter`, from frame 0; mean keypoint error summed, without
+/// → with the trigger; confirmed over [`CONFIRM_FRAMES`] since), sphere-mesh: ToF 22.43 →
 /// 21.07 mm (`axis_interaction` 4.28 → 2.07, `crossing` 5.36 → 6.21, the 14 others within
 /// 0.05 mm, the median frame unchanged), noise-free 11.42 → 7.20 mm (`axis_interaction` 3.80 →
 /// 0.53, `crossing` 2.33 → 1.35, `random` 0.69 → 0.75); Ch. 2 cylinders, ToF: 36.04 → 34.64 mm
@@ -113,7 +114,10 @@ const SCORE_WINDOW: usize = 60;
 /// cold starts of [`super::digit_variants`] (90 frames each) did not change. Tried and not
 /// kept: letting a variant win with a mean distance up to 10 % larger (ToF moves it by a few
 /// per cent), ToF library 21.07 → 20.49 mm, but ToF cold starts 157.67 → 199.01 mm
-/// (`rotation_fast` from frame 105 3.67 → 25.42, `random` from 165 4.07 → 15.70).
+/// (`rotation_fast` from frame 105 3.67 → 25.42, `random` from 165 4.07 → 15.70). Confirmed
+/// (session 34), the Ch. 2 cylinders' ToF library went 34.64 → 32.93 mm (`crossing` 4.55 →
+/// 3.02, `abduction` 2.27 → 2.08), the sphere-mesh tracker's structured-light library 16.57 →
+/// 12.38 mm against session 33's (`crossing` 6.54 → 2.55, `random` 1.09 → 0.87).
 const SCORE_RATIO: f64 = 1.3;
 
 /// Frames after a triggered digit search before the next may be: a search solves ≈ 10 frames'
