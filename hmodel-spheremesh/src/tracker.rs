@@ -444,8 +444,8 @@ impl<'m> Tracker<'m> {
     /// search then holds fixed. `sigma` is the depth noise the caller measured (mm; `None`: not
     /// measured); it sets the along-ray registration and the loss criterion as in
     /// [`Self::track`]. Returns the better pose and its statistics, or `None` when no variant
-    /// fits the frame better (or the frame has too few points, or `pose` is not this skeleton's). The tracker
-    /// continues from the pose returned.
+    /// fits the frame better (or the frame has too few points, or `pose` is not this
+    /// skeleton's). The tracker continues from the pose returned.
     pub fn search_digits(
         &mut self,
         frame: &PreprocessedFrame,

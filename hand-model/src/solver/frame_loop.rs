@@ -270,10 +270,11 @@ impl FrameLoop {
     /// changed it). The variants must beat the tracked pose also when it is solved once more
     /// aside: a pose still converging otherwise lost to a variant by the variant's extra solve
     /// (74 cold starts of 90 frames, mean keypoint error summed, Ch. 3 tracker: ToF 157.67 →
-    /// 152.60 mm, `rotation_fast` from frame 165 8.76 → 3.81; noise-free 113.07 → 112.69). The same digit search runs on a tracked frame whose score
-    /// ([`FrameStats::score`]) exceeds 1.3 times the median of the last 60 frames' (once 30 are
-    /// in), at most once in 30 frames; its better pose replaces the tracked one only after it
-    /// has fitted [`CONFIRM_FRAMES`] frames in a row better ([`Self::challenge`]).
+    /// 152.60 mm, `rotation_fast` from frame 165 8.76 → 3.81; noise-free 113.07 → 112.69).
+    /// The same digit search runs on a tracked frame whose score ([`FrameStats::score`])
+    /// exceeds 1.3 times the median of the last 60 frames' (once 30 are in), at most once in
+    /// 30 frames; its better pose replaces the tracked one only after it has fitted
+    /// [`CONFIRM_FRAMES`] frames in a row better ([`Self::challenge`]).
     pub fn step(&mut self, problem: &mut impl TrackingProblem, num_points: usize) -> FrameOutcome {
         let mut out = FrameOutcome::default();
         if num_points < self.loss.min_points.max(1) {
@@ -413,12 +414,13 @@ impl FrameLoop {
         Some(stats)
     }
 
-    /// The digit search (at the second look, or triggered by a jump of the score): each digit in turn set to each of its flexion
-    /// variants ([`TrackingProblem::digit_variants`]) of the current pose and solved aside;
-    /// a variant that is not a poor placement and beats the current pose both by
-    /// [`FrameStats::score`] and by the points' mean distance replaces it, and the next digit
-    /// starts from there. The problem is left at the chosen pose; the statistics are returned
-    /// (the history cleared) when the pose changed.
+    /// The digit search (at the second look, or triggered by a jump of the score): each digit
+    /// in turn set to each of its flexion variants ([`TrackingProblem::digit_variants`]) of the
+    /// current pose and solved aside; a variant that is not a poor placement and beats the
+    /// current pose both by [`FrameStats::score`] and by the points' mean distance (the pose as
+    /// tracked and solved once more aside, see [`Self::lower_bar`]) replaces it, and the next
+    /// digit starts from there. The problem is left at the chosen pose; the statistics are
+    /// returned when the pose changed (the caller clears the history).
     fn refine_digits(&mut self, problem: &mut impl TrackingProblem) -> Option<FrameStats> {
         if !problem.refresh(&self.pose) {
             return None;
