@@ -834,17 +834,24 @@ mod tests {
         assert_eq!(toy.cleared, cleared);
     }
 
-    /// A tracked frame that fits much worse than the recent ones triggers the digit search;
-    /// its better pose replaces the tracked one once it has fitted [`CONFIRM_FRAMES`] frames
-    /// better; the next jump within the cooldown does not search.
-    #[test]
-    fn a_jump_of_the_score_triggers_the_digit_search() {
+    /// A loop that has tracked the toy at its target for a whole score window, the toy's
+    /// digit variant 0.2 from the target, its solve reaching 0.5.
+    fn tracked_a_window() -> (FrameLoop, Toy) {
         let mut fl = FrameLoop::new(Pose { values: vec![0.0] }, LossParams::default());
         let mut toy = Toy::new(0.0, 0.5, vec![(0.2, false)]);
         toy.variants = vec![0.2];
         for _ in 0..SCORE_WINDOW {
             fl.step(&mut toy, 500);
         }
+        (fl, toy)
+    }
+
+    /// A tracked frame that fits much worse than the recent ones triggers the digit search;
+    /// its better pose replaces the tracked one once it has fitted [`CONFIRM_FRAMES`] frames
+    /// better; the next jump within the cooldown does not search.
+    #[test]
+    fn a_jump_of_the_score_triggers_the_digit_search() {
+        let (mut fl, mut toy) = tracked_a_window();
         assert_eq!(fl.pose.values[0], 0.0);
         // The data move beyond the solve's reach: the tracked pose fits 3 mm off.
         toy.target = 3.0;
@@ -868,12 +875,7 @@ mod tests {
     /// tracked pose is dropped: the data jumped for one frame and came back.
     #[test]
     fn a_candidate_that_loses_a_frame_is_dropped() {
-        let mut fl = FrameLoop::new(Pose { values: vec![0.0] }, LossParams::default());
-        let mut toy = Toy::new(0.0, 0.5, vec![(0.2, false)]);
-        toy.variants = vec![0.2];
-        for _ in 0..SCORE_WINDOW {
-            fl.step(&mut toy, 500);
-        }
+        let (mut fl, mut toy) = tracked_a_window();
         toy.target = 3.0;
         assert!(fl.step(&mut toy, 500).flags.is_empty());
         assert!(fl.candidate.is_some());
