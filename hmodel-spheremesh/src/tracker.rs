@@ -111,7 +111,15 @@ pub struct TrackerConfig {
     /// measured depth noise.
     pub ray_slide: f64,
     /// Above that noise the slide is this many σ̂ ([`Self::ray_slide_for`]; 0: fixed). Default
-    /// 1.5: the 7.5 mm slide was chosen on the ToF model's σ̂ ≈ 5 mm.
+    /// 1.5: the 7.5 mm slide was chosen on the ToF model's σ̂ ≈ 5 mm. The limit has a cost on
+    /// a palm seen edge-on, where the noise slides many footpoints past it and those points keep
+    /// their closest points: online calibration then widens the palm along the rays (the ToF
+    /// `occlusion` cut from frame 105: `pinky_base_x` +12.5, `index_base_x` −11.2 mm in 60
+    /// frames, mean keypoint error 6.53 mm against 3.30 mm with no limit). Measured in session
+    /// 34 on the 74 ToF cold starts (90 frames each, mean keypoint error summed), 1.5 → 2.5:
+    /// online calibration 169.88 → 194.53 mm, this tracker 152.60 → 163.76 mm (`random` from
+    /// frame 165 4.07 → 15.56); weighting those points 0 instead of keeping their closest
+    /// points: 169.88 → 170.38 and 152.60 → 171.97 mm.
     pub ray_slide_noise: f64,
     /// ℓ1 by IRLS (as htrack/hmodel, ANCHOR-FACTS §5.3).
     pub irls: IrlsParams,
