@@ -482,14 +482,18 @@ impl FrameLoop {
         stats: &FrameStats,
     ) -> Option<FrameStats> {
         let tracked = self.pose.clone();
-        let (candidate, wins) = match self.candidate.take() {
-            Some((c, wins)) => (self.challenge(problem, &tracked, c)?.0, wins + 1),
+        // Both ways leave the problem at the candidate.
+        let (candidate, at_candidate, wins) = match self.candidate.take() {
+            Some((c, wins)) => {
+                let (pose, s) = self.challenge(problem, &tracked, c)?;
+                (pose, s, wins + 1)
+            }
             None => {
                 if !self.scores.triggers(stats.score()) {
                     return None;
                 }
-                self.refine_digits(problem)?;
-                (std::mem::replace(&mut self.pose, tracked), 1)
+                let s = self.refine_digits(problem)?;
+                (std::mem::replace(&mut self.pose, tracked), s, 1)
             }
         };
         if wins < CONFIRM_FRAMES {
@@ -497,13 +501,9 @@ impl FrameLoop {
             let _ = problem.refresh(&self.pose);
             return None;
         }
-        if !problem.refresh(&candidate) {
-            let _ = problem.refresh(&self.pose);
-            return None;
-        }
         self.pose = candidate;
         problem.clear_history();
-        Some(problem.frame_stats(&self.loss))
+        Some(at_candidate)
     }
 
     /// Whether `candidate` (a pose the digit search found on an earlier frame), solved aside
