@@ -100,6 +100,11 @@ pub struct TrackingCtx<'m> {
     ray_entries: Vec<(u32, u32, Vector3<f64>)>,
     /// The points whose entry is cast one by one (no rendering, or off their pixel's ray).
     ray_cast: Vec<u32>,
+    /// Per point, whether it was registered along its ray before the closest points were
+    /// sought (and so has none; [`TrackingCtx::settle_entries`]).
+    settled: Vec<bool>,
+    /// How many points the last update registered along their rays.
+    along_ray_points: usize,
     irls: IrlsParams,
     sensor: SensorView,
     m2d: Option<M2dMode>,
@@ -246,6 +251,8 @@ impl<'m> TrackingCtx<'m> {
             ray_hits: Vec::new(),
             ray_entries: Vec::new(),
             ray_cast: Vec::new(),
+            settled: Vec::new(),
+            along_ray_points: 0,
             irls,
             sensor: SensorView::default(),
             m2d: Some(M2dMode::Render),
@@ -405,6 +412,10 @@ impl<'m> TrackingCtx<'m> {
     /// (`occlusion`, structured light, default template) the unlimited rule lost the hand
     /// (mean keypoint error 7.9 → 18.1 mm, online calibration 1.8 → 15.5 mm); with 5 mm
     /// it tracks as the thesis' rule (7.90 / 1.80 mm), with 7.5 mm too (7.90 / 1.82 mm).
+    ///
+    /// A footpoint within half the slide of its point is taken without its closest point (which
+    /// then lies within the slide anyway, unless it is a front-facing substitute), and that
+    /// closest point is not sought.
     pub fn set_ray_slide(&mut self, slide: f64) {
         self.ray_slide = if slide.is_nan() { -1.0 } else { slide };
     }
@@ -437,45 +448,26 @@ impl<'m> TrackingCtx<'m> {
             self.correspondences.fill(None);
             return Err(TermError::Failed("posed spheres are not finite"));
         }
-        // Each point's previous element and margin: the same correspondences as a fresh search
-        // (bit for bit), most of them without searching.
-        if self.front_facing {
-            self.geometry.project_points_front_facing_coherent(
-                &self.points,
-                &self.view,
-                &mut self.coherence,
-                &mut self.correspondences,
-            );
-        } else {
-            self.geometry.project_points_coherent(
-                &self.points,
-                &mut self.coherence,
-                &mut self.correspondences,
-            );
+        let reposed = Instant::now();
+        self.timing.closest_us += (reposed - start).as_secs_f64() * 1e6;
+        // Along-ray entries first: a point registered at an entry near enough to it needs no
+        // closest point (`settle_entries`).
+        self.settled.clear();
+        self.settled.resize(self.points.len(), false);
+        self.ray_entries.clear();
+        self.ray_cast.clear();
+        self.along_ray_points = 0;
+        if let Some(gate) = self.ray_gate {
+            if !self.render_entries() {
+                self.ray_cast.extend(0..self.points.len() as u32);
+            }
+            self.settle_entries(gate);
         }
-        for (((c, p), u), (r, w)) in self
-            .correspondences
-            .iter()
-            .zip(&self.points)
-            .zip(self.directions.iter_mut())
-            .zip(self.residuals.iter_mut().zip(self.weights.iter_mut()))
-        {
-            let Some(c) = c else {
-                (*r, *w) = (0.0, 0.0);
-                continue;
-            };
-            let d = p - c.point;
-            let len = d.norm();
-            *u = if len > 1e-9 { d / len } else { c.normal };
-            *r = -len;
-            *w = if self.reweighted {
-                self.irls.weight(len)
-            } else {
-                1.0
-            };
-        }
+        let settled = Instant::now();
+        self.timing.along_ray_us += (settled - reposed).as_secs_f64() * 1e6;
+        self.project_closest();
         let closest = Instant::now();
-        self.timing.closest_us += (closest - start).as_secs_f64() * 1e6;
+        self.timing.closest_us += (closest - settled).as_secs_f64() * 1e6;
         if let Some(gate) = self.ray_gate {
             self.register_along_rays(gate);
         }
@@ -491,38 +483,126 @@ impl<'m> TrackingCtx<'m> {
         std::mem::take(&mut self.timing)
     }
 
-    /// [`TrackingCtx::set_ray_gate`]'s correspondences, over the closest points already found.
-    /// The ray's entry is the first hit over the whole model (requiring it on the closest
-    /// point's element instead mixed the two rules at the elements' junctions and lost most of
-    /// the gain, see the `ray_gate` docs).
-    fn register_along_rays(&mut self, gate: f64) {
-        self.ray_entries.clear();
-        self.ray_cast.clear();
-        if !self.render_entries() {
-            self.ray_cast.extend(0..self.points.len() as u32);
+    /// The closest (front-facing) point of every point not settled along its ray, with its
+    /// residual and weight. Each point's previous element and margin give the same
+    /// correspondences as a fresh search (bit for bit), most of them without searching.
+    fn project_closest(&mut self) {
+        if self.front_facing {
+            self.geometry.project_points_front_facing_coherent_skipping(
+                &self.points,
+                &self.settled,
+                &self.view,
+                &mut self.coherence,
+                &mut self.correspondences,
+            );
+        } else {
+            self.geometry.project_points_coherent_skipping(
+                &self.points,
+                &self.settled,
+                &mut self.coherence,
+                &mut self.correspondences,
+            );
         }
-        self.cast_entries();
-        for &(i, element, entry) in &self.ray_entries {
-            let (i, p) = (i as usize, &self.points[i as usize]);
-            if (entry - p).norm_squared() > gate * gate {
+        for (i, (c, p)) in self.correspondences.iter().zip(&self.points).enumerate() {
+            if self.settled[i] {
                 continue;
             }
-            let Some(q) = self.geometry.project_on_element(element as usize, &entry) else {
+            let Some(c) = c else {
+                (self.residuals[i], self.weights[i]) = (0.0, 0.0);
                 continue;
             };
-            if self.correspondences[i].is_some_and(|c| (c.point - q.point).norm() > self.ray_slide)
-            {
-                continue;
-            }
-            let res = q.normal.dot(&(q.point - p));
-            self.directions[i] = q.normal;
-            self.residuals[i] = res;
+            let d = p - c.point;
+            let len = d.norm();
+            self.directions[i] = if len > 1e-9 { d / len } else { c.normal };
+            self.residuals[i] = -len;
             self.weights[i] = if self.reweighted {
-                self.irls.weight(res.abs())
+                self.irls.weight(len)
             } else {
                 1.0
             };
-            self.correspondences[i] = Some(q);
+        }
+    }
+
+    /// The footpoint of a point `i` at its ray's `entry` into `element`, when the entry lies
+    /// within `gate` of the point.
+    fn entry_footpoint(
+        &self,
+        i: usize,
+        element: u32,
+        entry: &Vector3<f64>,
+        gate: f64,
+    ) -> Option<Projection> {
+        if (entry - self.points[i]).norm_squared() > gate * gate {
+            return None;
+        }
+        self.geometry.project_on_element(element as usize, entry)
+    }
+
+    /// Registers point `i` at the along-ray footpoint `q`, point-to-plane.
+    fn register_at(&mut self, i: usize, q: Projection) {
+        let res = q.normal.dot(&(q.point - self.points[i]));
+        self.directions[i] = q.normal;
+        self.residuals[i] = res;
+        self.weights[i] = if self.reweighted {
+            self.irls.weight(res.abs())
+        } else {
+            1.0
+        };
+        self.correspondences[i] = Some(q);
+        self.along_ray_points += 1;
+    }
+
+    /// Registers, before any closest point is sought, the rendered entries whose footpoint `q`
+    /// lies within half the slide of its point `p` (flagged `settled`): the closest point `c`
+    /// is then within the slide of `q` whatever it is, since `‖c − q‖ ≤ ‖c − p‖ + ‖p − q‖ ≤
+    /// 2‖p − q‖ (`q` lies on the model's surface, and no element's surface point is nearer to
+    /// `p` than its closest one, inside the model too). Under depth noise most points are
+    /// settled so, and their closest points, the tracker's dearest query, are not sought. For
+    /// a front-facing substitute the bound does not hold (a point behind a finger's middle,
+    /// its ray entering the finger's front); such a point is registered at its entry as well:
+    /// the slide guards against rays that enter another part in front, which lie farther.
+    /// The other entries stay in `ray_entries` for [`TrackingCtx::register_along_rays`].
+    fn settle_entries(&mut self, gate: f64) {
+        let half = 0.5 * self.ray_slide;
+        let mut k = 0;
+        while k < self.ray_entries.len() {
+            let (i, element, entry) = self.ray_entries[k];
+            let i = i as usize;
+            let q = self.entry_footpoint(i, element, &entry, gate);
+            match q {
+                Some(q) if (q.point - self.points[i]).norm() <= half => {
+                    self.register_at(i, q);
+                    self.settled[i] = true;
+                    self.ray_entries.swap_remove(k);
+                }
+                Some(_) => k += 1,
+                None => {
+                    self.ray_entries.swap_remove(k);
+                }
+            }
+        }
+    }
+
+    /// [`TrackingCtx::set_ray_gate`]'s correspondences for the points not settled, over the
+    /// closest points found: the entries left by [`TrackingCtx::settle_entries`] and those
+    /// cast one by one. The ray's entry is the first hit over the whole model (requiring it on
+    /// the closest point's element instead mixed the two rules at the elements' junctions and
+    /// lost most of the gain, see the `ray_gate` docs).
+    fn register_along_rays(&mut self, gate: f64) {
+        self.cast_entries();
+        let half = 0.5 * self.ray_slide;
+        for k in 0..self.ray_entries.len() {
+            let (i, element, entry) = self.ray_entries[k];
+            let i = i as usize;
+            let Some(q) = self.entry_footpoint(i, element, &entry, gate) else {
+                continue;
+            };
+            let near = (q.point - self.points[i]).norm() <= half;
+            let slid = |c: &Projection| (c.point - q.point).norm() > self.ray_slide;
+            if !near && self.correspondences[i].is_some_and(|c| slid(&c)) {
+                continue;
+            }
+            self.register_at(i, q);
         }
     }
 
@@ -570,7 +650,7 @@ impl<'m> TrackingCtx<'m> {
             if p.cross(&dir).norm() > 1e-9 * p.norm() * dir.norm() {
                 self.ray_cast.push(i);
             } else if let Some(hit) = hits.peek().filter(|h| h.pixel == k) {
-                if self.correspondences[i as usize].is_some() {
+                if p.iter().all(|x| x.is_finite()) {
                     self.ray_entries.push((i, hit.element, hit.point));
                 }
             }
@@ -980,8 +1060,9 @@ mod tests {
         }
         assert!(rendered.render_entries(), "the frame names its pixels");
         assert!(!cast.render_entries());
-        let along = rendered.ray_entries.len();
+        let along = rendered.along_ray_points;
         assert!(along > frame.points.len() / 2, "{along} along-ray points");
+        assert_eq!(along, cast.along_ray_points);
         for (i, (a, b)) in rendered
             .correspondences()
             .iter()

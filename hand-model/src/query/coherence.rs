@@ -140,6 +140,26 @@ impl Track {
         margin: f64::NEG_INFINITY,
         point: Vector3::new(0.0, 0.0, 0.0),
     };
+
+    /// Carries the memory of a point that a call skipped over the model's motion in that call:
+    /// the margin less the largest motion of any element (which bounds the winner's and the
+    /// runner's motion too), the runner's bound less the runner's own motion. The next call
+    /// subtracts its own motions as usual, so the bounds stay lower bounds. An unbounded
+    /// motion (another model) forgets the point.
+    fn wear(&mut self, motions: &Motions<'_>) {
+        let all = motions.largest.1;
+        let runner = motions
+            .per_element
+            .get(self.runner as usize)
+            .copied()
+            .unwrap_or(0.0);
+        if !(all.is_finite() && runner.is_finite()) {
+            *self = Self::NONE;
+            return;
+        }
+        self.margin -= all;
+        self.runner_margin -= runner;
+    }
 }
 
 impl Coherence {
@@ -266,14 +286,57 @@ impl SphereMeshGeometry {
         state: &mut Coherence,
         out: &mut [Option<Projection>],
     ) {
+        self.coherent_batch(points, None, state, out);
+    }
+
+    /// [`project_points_coherent`](Self::project_points_coherent) for the points whose `skip`
+    /// entry is false alone: `out[i]` of a skipped point is left as it is, and its memory is
+    /// worn down by the model's motion since the last call (every margin less the largest
+    /// element motion), so that it stays sound for a later call that projects the point. A
+    /// tracker skips the points whose correspondence another rule already settled (the
+    /// sphere-mesh tracker's along-ray registration). The projected points' `out` is bit for
+    /// bit what [`project_points`](Self::project_points) returns, whatever `state` holds.
+    ///
+    /// # Panics
+    /// If `out` or `skip` is not as long as `points`.
+    #[track_caller]
+    pub fn project_points_coherent_skipping(
+        &self,
+        points: &[Vector3<f64>],
+        skip: &[bool],
+        state: &mut Coherence,
+        out: &mut [Option<Projection>],
+    ) {
+        assert_eq!(points.len(), skip.len(), "one skip flag per point");
+        self.coherent_batch(points, Some(skip), state, out);
+    }
+
+    /// The coherent projection of the points not skipped (all of them for `None`).
+    #[track_caller]
+    pub(super) fn coherent_batch(
+        &self,
+        points: &[Vector3<f64>],
+        skip: Option<&[bool]>,
+        state: &mut Coherence,
+        out: &mut [Option<Projection>],
+    ) {
         assert_eq!(points.len(), out.len(), "one output slot per point");
         state.begin(&self.spheres, &self.elements, points.len());
         self.order_block_motions(&state.motions, &mut state.block_motions);
         self.near_motions(&state.motions, &mut state.near_motions);
         let motions = Motions::new(&state.motions, &state.near_motions, &state.block_motions);
         let mut kept = 0;
-        for ((p, o), track) in points.iter().zip(out.iter_mut()).zip(&mut state.tracks) {
-            kept += usize::from(self.project_tracked(p, track, &motions, o));
+        for (i, ((p, o), track)) in points
+            .iter()
+            .zip(out.iter_mut())
+            .zip(&mut state.tracks)
+            .enumerate()
+        {
+            if skip.is_some_and(|s| s[i]) {
+                track.wear(&motions);
+            } else {
+                kept += usize::from(self.project_tracked(p, track, &motions, o));
+            }
         }
         state.kept = kept;
     }

@@ -62,8 +62,8 @@ enum PlainSearch<'a> {
     Fresh,
     /// From the given seeds (written back by `project_batch`).
     Seeded(&'a mut [u32]),
-    /// With the temporal coherence of `coherence.rs`.
-    Coherent(&'a mut Coherence),
+    /// With the temporal coherence of `coherence.rs`, skipping the points flagged (if any).
+    Coherent(&'a mut Coherence, Option<&'a [bool]>),
 }
 
 impl SphereMeshGeometry {
@@ -149,7 +149,30 @@ impl SphereMeshGeometry {
         state: &mut Coherence,
         out: &mut [Option<Projection>],
     ) {
-        self.front_facing_batch(points, view, PlainSearch::Coherent(state), out);
+        self.front_facing_batch(points, view, PlainSearch::Coherent(state, None), out);
+    }
+
+    /// [`project_points_front_facing_coherent`](Self::project_points_front_facing_coherent) for
+    /// the points whose `skip` entry is false alone, as
+    /// [`project_points_coherent_skipping`](Self::project_points_coherent_skipping): a skipped
+    /// point's `out` is left as it is and never needs a substitute (no silhouette is built when
+    /// only skipped points would have needed one). The projected points' `out` is bit for bit
+    /// what [`project_points_front_facing`](Self::project_points_front_facing) returns.
+    ///
+    /// # Panics
+    /// If `out` or `skip` is not as long as `points`.
+    #[track_caller]
+    pub fn project_points_front_facing_coherent_skipping(
+        &self,
+        points: &[Vector3<f64>],
+        skip: &[bool],
+        view: &View,
+        state: &mut Coherence,
+        out: &mut [Option<Projection>],
+    ) {
+        assert_eq!(points.len(), skip.len(), "one skip flag per point");
+        let plain = PlainSearch::Coherent(state, Some(skip));
+        self.front_facing_batch(points, view, plain, out);
     }
 
     /// The front-facing batch with the plain projections found by `plain`.
@@ -166,24 +189,25 @@ impl SphereMeshGeometry {
             out.fill(None);
             return;
         }
-        let state = match plain {
+        let (state, skip) = match plain {
             PlainSearch::Fresh => {
                 self.project_batch(points, None, out);
-                None
+                (None, None)
             }
             PlainSearch::Seeded(seeds) => {
                 self.project_batch(points, Some(seeds), out);
-                None
+                (None, None)
             }
-            PlainSearch::Coherent(state) => {
-                self.project_points_coherent(points, state, out);
-                Some(state)
+            PlainSearch::Coherent(state, skip) => {
+                self.coherent_batch(points, skip, state, out);
+                (Some(state), skip)
             }
         };
-        if !out
-            .iter()
-            .any(|o| o.is_some_and(|q| view.is_back_facing(&q.point, &q.normal)))
-        {
+        let wanted = |i: usize| skip.is_none_or(|s| !s[i]);
+        let back_facing = |i: usize, o: &Option<Projection>| {
+            wanted(i) && o.is_some_and(|q| view.is_back_facing(&q.point, &q.normal))
+        };
+        if !out.iter().enumerate().any(|(i, o)| back_facing(i, o)) {
             return;
         }
         let Some(direction) = self.silhouette_direction(view) else {
@@ -207,9 +231,9 @@ impl SphereMeshGeometry {
             },
             None => fresh.insert(UnionSilhouette::build(self, basis, BURIED_TOLERANCE)),
         };
-        for (p, o) in points.iter().zip(out.iter_mut()) {
-            if let Some(plain) = o {
-                if view.is_back_facing(&plain.point, &plain.normal) {
+        for (i, (p, o)) in points.iter().zip(out.iter_mut()).enumerate() {
+            if back_facing(i, o) {
+                if let Some(plain) = o {
                     *plain = self.substitute(p, plain, view, silhouette);
                 }
             }
