@@ -296,6 +296,20 @@
 //! mean keypoint errors 12.11 → 13.55 mm; the plain tracker 10.36 → 10.61, occlusion 1.65 →
 //! 2.06). Under ToF
 //! the goal of 200 frames/s is not met: ≈ 76 frames/s.
+//!
+//! Session 35, under ToF: the along-ray rays are now rendered *before* the closest points, and
+//! a point whose ray enters the model within half the slide of it is registered there without
+//! a closest-point search (its closest point lies within the slide whatever it is;
+//! `hmodel_spheremesh`'s docs). ≈ 89 % of the points settle so after a frame's first
+//! iteration. `hands bench --model online` (teaser, one thread), the same machine and session:
+//! closest points 3 862 → 2 155 µs a frame (plain tracker) and 3 358 → 1 775 µs (online), the
+//! plain frame 11 447 → 9 894 µs, the online frame 10 783 → 9 191 µs (≈ 0.85×, ≈ 109
+//! frames/s). The along-ray rendering (≈ 4.7 ms: ≈ 2 exact element casts per pixel, ≈ 56 ns
+//! each) is now half the frame. Tracking is unchanged: the 74 ToF cold starts 152.60 →
+//! 152.57 mm summed (online 169.88 → 169.18), the library's ToF motions 20.01 → 20.02 mm
+//! (online 23.31 → 23.30). An early stop on small steps (`LmOptions::step_tolerance`) does
+//! not pay under ToF: the noise keeps the steps above 0.01 (no frame stops), and at 0.1 the
+//! teaser's error rises 0.81 → 1.16 mm for 4.0 ms a frame. Not met: ≈ 109 frames/s.
 
 #[path = "../tests/common/mod.rs"]
 mod common;
