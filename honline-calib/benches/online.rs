@@ -303,13 +303,23 @@
 //! `hmodel_spheremesh`'s docs). ≈ 89 % of the points settle so after a frame's first
 //! iteration. `hands bench --model online` (teaser, one thread), the same machine and session:
 //! closest points 3 862 → 2 155 µs a frame (plain tracker) and 3 358 → 1 775 µs (online), the
-//! plain frame 11 447 → 9 894 µs, the online frame 10 783 → 9 191 µs (≈ 0.85×, ≈ 109
-//! frames/s). The along-ray rendering (≈ 4.7 ms: ≈ 2 exact element casts per pixel, ≈ 56 ns
+//! plain frame 11 447 → 9 894 µs, the online frame 10 783 → 9 191 µs (≈ 0.85×; a second run
+//! of the same binary: 9 565 µs, the machine's spread). The along-ray rendering (≈ 4.7 ms: ≈ 2 exact element casts per pixel, ≈ 56 ns
 //! each) is now half the frame. Tracking is unchanged: the 74 ToF cold starts 152.60 →
 //! 152.57 mm summed (online 169.88 → 169.18), the library's ToF motions 20.01 → 20.02 mm
 //! (online 23.31 → 23.30). An early stop on small steps (`LmOptions::step_tolerance`) does
 //! not pay under ToF: the noise keeps the steps above 0.01 (no frame stops), and at 0.1 the
-//! teaser's error rises 0.81 → 1.16 mm for 4.0 ms a frame. Not met: ≈ 109 frames/s.
+//! teaser's error rises 0.81 → 1.16 mm for 4.0 ms a frame.
+//!
+//! Then the culling polytopes of the ray casts (`hand_model::render`): a wedge's prism is cut
+//! by its two tangent planes instead of the plane of centers ± the largest radius, and each
+//! side plane of a pill's box or a wedge's prism sits at the element's support function in its
+//! direction (the largest `n·cᵢ + rᵢ`) instead of `r_max` beyond the nearest center. Of the
+//! ≈ 2.1 exact element casts per rendered pixel, 42 % were wedges that the ray missed (palm
+//! wedges next to the one it hits). Back to back on the same machine: along-ray 5 453 → 5 004
+//! µs a frame (plain tracker), 4 840 → 4 493 µs (online); the online frame 9 565 → 9 213 µs
+//! (≈ 0.96×), tracks bit for bit the same (300 ToF teaser frames with online calibration).
+//! Under ToF the goal of 200 frames/s is not met: ≈ 105–110 frames/s.
 
 #[path = "../tests/common/mod.rs"]
 mod common;

@@ -192,7 +192,18 @@ fn margin(spheres: &[Sphere]) -> (f64, f64) {
     (r_max, 1e-9 * scale)
 }
 
-/// The oriented box around a pill: along the axis from `a` to `b`, `r_max` beyond each center.
+/// The support function `max_i (n·cᵢ + rᵢ)` of the convex hull of `spheres` in the unit
+/// direction `n`, plus `eps`: the tightest half-space of normal `n` that holds the element.
+fn support(spheres: &[Sphere], n: &V3, eps: f64) -> (V3, f64) {
+    let h = spheres
+        .iter()
+        .map(|s| n.dot(&s.center) + s.radius)
+        .fold(f64::NEG_INFINITY, f64::max);
+    (*n, h + eps)
+}
+
+/// The oriented box around a pill: along the axis from `a` to `b`, each end sphere's own
+/// radius beyond its center (the support planes), `r_max` around the axis.
 fn pill_hull(a: &Sphere, b: &Sphere) -> Halfspaces {
     let (r, eps) = margin(&[*a, *b]);
     let e = b.center - a.center;
@@ -203,10 +214,9 @@ fn pill_hull(a: &Sphere, b: &Sphere) -> Halfspaces {
     };
     let u = any_perpendicular(&axis);
     let v = axis.cross(&u);
-    let (la, lb) = (axis.dot(&a.center), axis.dot(&b.center));
     Halfspaces::new(&[
-        (axis, la.max(lb) + r + eps),
-        (-axis, -la.min(lb) + r + eps),
+        support(&[*a, *b], &axis, eps),
+        support(&[*a, *b], &-axis, eps),
         (u, u.dot(&a.center) + r + eps),
         (-u, -u.dot(&a.center) + r + eps),
         (v, v.dot(&a.center) + r + eps),
@@ -214,9 +224,10 @@ fn pill_hull(a: &Sphere, b: &Sphere) -> Halfspaces {
     ])
 }
 
-/// The triangular prism around a wedge: the plane of centers ± `r_max`, and each edge's in-plane
-/// outward normal pushed out by `r_max`. Empty (no culling) for degenerate triangles.
-fn wedge_hull(a: &Sphere, b: &Sphere, c: &Sphere) -> Halfspaces {
+/// The triangular prism around a wedge: the two tangent planes (the plane of centers ± `r_max`
+/// where they do not exist), and the support plane of each edge's in-plane outward normal.
+/// Empty (no culling) for degenerate triangles.
+fn wedge_hull(a: &Sphere, b: &Sphere, c: &Sphere, faces: &Option<[Face; 2]>) -> Halfspaces {
     let (r, eps) = margin(&[*a, *b, *c]);
     let m = (b.center - a.center).cross(&(c.center - a.center));
     let scale = (b.center - a.center)
@@ -226,19 +237,28 @@ fn wedge_hull(a: &Sphere, b: &Sphere, c: &Sphere) -> Halfspaces {
         return Halfspaces::new(&[]);
     }
     let m = m.normalize();
-    let mut planes = [
-        (m, m.dot(&a.center) + r + eps),
-        (-m, -m.dot(&a.center) + r + eps),
-        (m, 0.0),
-        (m, 0.0),
-        (m, 0.0),
-    ];
+    let mut planes = match faces {
+        Some([f, g]) => [
+            (f.normal, f.offset + eps),
+            (g.normal, g.offset + eps),
+            (m, 0.0),
+            (m, 0.0),
+            (m, 0.0),
+        ],
+        None => [
+            (m, m.dot(&a.center) + r + eps),
+            (-m, -m.dot(&a.center) + r + eps),
+            (m, 0.0),
+            (m, 0.0),
+            (m, 0.0),
+        ],
+    };
     for (k, (p, q, other)) in [(a, b, c), (b, c, a), (c, a, b)].into_iter().enumerate() {
         let mut n = (q.center - p.center).cross(&m).normalize();
         if n.dot(&(other.center - p.center)) > 0.0 {
             n = -n;
         }
-        planes[2 + k] = (n, n.dot(&p.center) + r + eps);
+        planes[2 + k] = support(&[*a, *b, *c], &n, eps);
     }
     Halfspaces::new(&planes)
 }
@@ -286,14 +306,15 @@ impl PreparedElement {
             return None;
         }
         let spheres = [*a, *b, *c];
+        let faces = tangent_faces(a, b, c);
         Some(Self {
             spheres,
             count: 3,
             cones: [Cone::new(a, b), Cone::new(b, c), Cone::new(c, a)],
-            faces: tangent_faces(a, b, c),
+            faces,
             radius_plane: [a.radius, b.radius - a.radius, c.radius - a.radius],
             bounds: bounding_sphere(&spheres),
-            hull: wedge_hull(a, b, c),
+            hull: wedge_hull(a, b, c, &faces),
         })
     }
 
