@@ -147,7 +147,9 @@ fn ball_normal(s: &Sphere, x: &V3, d: &V3) -> V3 {
     }
 }
 
-/// Whether the ray's segment `[t_min, t_best]` meets a (bounding) ball.
+/// Whether the ray's segment `[t_min, t_best]` meets a (bounding) ball: the chord `[−b − √disc,
+/// −b + √disc]` reaches past `t_min` and starts before `t_best`, each tested squared (no
+/// square root: this test runs for every candidate element of every rendered pixel).
 #[inline]
 fn sphere_meets(b: &Sphere, ray: &Ray, t_best: f64) -> bool {
     let w = ray.origin - b.center;
@@ -156,8 +158,9 @@ fn sphere_meets(b: &Sphere, ray: &Ray, t_best: f64) -> bool {
     if disc.is_nan() || disc < 0.0 {
         return false;
     }
-    let sq = disc.sqrt();
-    -bb + sq >= ray.t_min && -bb - sq <= t_best
+    // √disc ≥ x holds when x ≤ 0, else when disc ≥ x².
+    let reaches = |x: f64| x <= 0.0 || disc >= x * x;
+    reaches(ray.t_min + bb) && reaches(-bb - t_best)
 }
 
 impl PreparedElement {
