@@ -8,7 +8,7 @@ use hand_model::solver::terms::{JointLimits, PosePrior};
 use hand_model::solver::{EnergyTerm, NoTerm, NormalEquations, PcaPrior, PriorSetup, TermError};
 use hand_model::spheremesh::{ShapeBasis, SphereMeshTemplate};
 use hmodel_spheremesh::calibration::{DataWeights, ShapeSpace};
-use hmodel_spheremesh::terms::Collision;
+use hmodel_spheremesh::terms::{Collision, CollisionParams};
 use hmodel_spheremesh::{EnabledTerms, TrackerConfig, TrackingCtx};
 use nalgebra::DMatrix;
 
@@ -111,7 +111,7 @@ impl FrameProblem {
                 },
             ),
             validity: ShapeValidity::new(finger_order_constraints(&basis), &layout, config.valid),
-            collision: Lifted(Collision::new(base, tc.collision.clone())),
+            collision: Lifted(Collision::new(base, collision_params(config))),
             collision_beta: basis.template_values(),
             limits: JointLimits::new(sk, &tc.joint_limits),
             pose_prior,
@@ -133,11 +133,11 @@ impl FrameProblem {
     /// thicker-fingered estimate's own rest geometry as penetration, pushes the fingers apart
     /// and, through the data term, the radii down (issue 8 acceptance: E_β 1.4 mm off a
     /// subject's truth within 1 s when started *at* the truth, ≈ 0.4 mm with the rebuild).
-    pub(crate) fn refresh_collision(&mut self, ctx: &OnlineCtx, tc: &TrackerConfig) {
+    pub(crate) fn refresh_collision(&mut self, ctx: &OnlineCtx, config: &OnlineConfig) {
         if self.collision_beta != ctx.beta {
             self.collision = Lifted(Collision::new(
                 ctx.tracking.template(),
-                tc.collision.clone(),
+                collision_params(config),
             ));
             self.collision_beta.clone_from(&ctx.beta);
         }
@@ -315,6 +315,15 @@ impl FrameProblem {
     ) -> bool {
         ne.symmetrize();
         marginal_information_into(ne.lhs(), &self.theta_index, &self.beta_index, scratch, out)
+    }
+}
+
+/// The collision settings of the joint solve: the tracker's, with the online tolerance
+/// ([`OnlineConfig::collision_tolerance`], validated finite and non-negative).
+fn collision_params(config: &OnlineConfig) -> CollisionParams {
+    CollisionParams {
+        tolerance: config.collision_tolerance,
+        ..config.tracker.collision.clone()
     }
 }
 

@@ -46,6 +46,12 @@
 //!   toward the template; the ramp keeps the first frames, tracked with a template that may be
 //!   far off, from locking a wrong shape in.
 //! - E_iekf uses `Σ̂⁻¹` (Eq. 4.11), not honline's `H²`, and only the joint estimator runs it.
+//! - The joint solve keeps the Ch. 3 tracker's finger collisions, which honline had switched
+//!   off (ANCHOR-FACTS §5.2): without them 4 of 74 ToF cold starts of 90 frames end above
+//!   10 mm (169.18 → 193.62 mm summed, session 35). They cost accuracy in a fist, where
+//!   pressed fingers overlap and the shape absorbs their push;
+//!   [`OnlineConfig::collision_tolerance`] (off by default) tolerates that overlap, at a price
+//!   on fast finger crossings (its docs).
 //! - The Laplace information comes from the data terms only (Eq. 4.5), the pose marginalized;
 //!   priors and barriers shape the mode but are not counted as measurements.
 //! - Beyond the thesis, an innovation gate ([`OnlineConfig::innovation_gate`], session 20): a

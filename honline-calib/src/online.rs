@@ -169,6 +169,36 @@ pub struct OnlineConfig {
     /// random subjects 7–12 noise-free 1.07 / 1.08 / 0.83 / 1.22 / 1.07 / 1.11 → 1.07 / 1.09 /
     /// 0.83 / 1.18 / 1.06 / 1.11.
     pub outside_gate: f64,
+    /// Penetration (mm) that the joint solve's collision term tolerates between two fingers
+    /// beyond their rest overlap (`hmodel_spheremesh::terms::CollisionParams::tolerance`;
+    /// the Ch. 3 tracker that places the hand, settles it and searches its digits keeps
+    /// [`Self::tracker`]'s). Default 0: the tracker's collisions as they are.
+    ///
+    /// Why it exists: in a fist the pills of neighbouring fingers overlap more than at rest
+    /// (0.1–1.3 mm at the library's `fist`; real fingers pressed together flatten). The
+    /// collision term pushes them apart, the pose gives way, and with the shape free the data
+    /// pull the finger bases back under the fingers: on the library's noise-free `fist` cut
+    /// from frame 45, online calibration started at the true shape walked `pinky_base_x`
+    /// 27 → 17 mm and `index_middle_length` 23 → 29 mm (mean keypoint error 2.06 mm against
+    /// 0.47 for the Ch. 3 tracker; 0.50 mm at 2 mm tolerance; `tests/hard_poses.rs`).
+    ///
+    /// Why it is not the default (session 35, `hands track --calibrate online`, mean keypoint
+    /// error summed, 0 → 2 mm): cold starts of 90 frames gain (74 ToF cuts 169.18 → 161.04, 22
+    /// better and 2 worse by more than 0.05 mm; 74 noise-free cuts 113.68 → 101.21, 21 and 2),
+    /// and so do the library's noise-free motions from frame 0 (9.98 → 6.65, none worse), but a
+    /// fast finger crossing is then resolved worse: both settings lose the crossed index and
+    /// middle finger for ≈ 60 frames, and with the tolerance the fingers pass through each
+    /// other and stay exchanged for ≈ 150 frames more (`crossing` ToF 4.07 → 5.92, structured
+    /// light 1.72 → 5.56; `axis_interaction` ToF 2.50 → 8.29). The library's ToF motions sum
+    /// 23.30 → 29.29 (14 of 16 better), structured light 13.75 → 14.83 (15 of 16). The
+    /// crossing's outcome is fragile either way (other noise seeds: 4.81 → 6.48, 6.97 → 6.26;
+    /// `axis_interaction` 2.17 → 2.05, 4.72 → 4.79). Tolerating only nearly parallel pills lost
+    /// the fist's gain too (1.92–2.48 mm) and not the crossing (ToF 7.40 mm); a tolerance that
+    /// fades for deep penetration (`(p² − t²)/p`) kept the fist (0.52 mm) but not the
+    /// structured-light crossing (5.56 mm); refusing the shape step on
+    /// frames in contact (collision energy above 0.3 / 1 mm of penetration) refused 545 / 200
+    /// of the ToF teaser's 700 frames and fixed one fist cut of two.
+    pub collision_tolerance: f64,
 }
 
 /// The share of the silhouette's area under which [`OnlineConfig::outside_gate`] refuses no
@@ -199,6 +229,7 @@ impl Default for OnlineConfig {
             noise_prior_exponent: 1.5,
             innovation_gate: 6.0,
             outside_gate: 3.0,
+            collision_tolerance: 0.0,
         }
     }
 }
@@ -217,6 +248,7 @@ impl OnlineConfig {
             ("innovation_gate", self.innovation_gate),
             ("outside_gate", self.outside_gate),
             ("noise_prior_exponent", self.noise_prior_exponent),
+            ("collision_tolerance", self.collision_tolerance),
         ];
         if let Some((name, w)) = weights.iter().find(|(_, w)| !(w.is_finite() && *w >= 0.0)) {
             return Err(OnlineError::Config(format!(
@@ -900,8 +932,7 @@ impl<'m> OnlineCalibrator<'m> {
             }
             self.set_prior();
             let t = Instant::now();
-            self.problem
-                .refresh_collision(&self.ctx, &self.config.tracker);
+            self.problem.refresh_collision(&self.ctx, &self.config);
             reshape_us += t.elapsed().as_secs_f64() * 1e6;
             let saved = (self.ctx.beta.clone(), self.ctx.latent);
             let temporal = self.config.tracker.enabled.temporal;

@@ -222,8 +222,9 @@ fn set_shape_starts_from_the_given_shape() {
 fn absurd_settings_are_refused_with_their_name() {
     let base = default_right_hand();
     type Spoil = fn(&mut OnlineConfig);
-    let cases: [(&str, Spoil); 4] = [
+    let cases: [(&str, Spoil); 5] = [
         ("measurement_weight", |c| c.measurement_weight = -0.5),
+        ("collision_tolerance", |c| c.collision_tolerance = -1.0),
         ("shape_prior", |c| c.shape_prior = f64::NAN),
         ("outside_gate", |c| c.outside_gate = f64::INFINITY),
         ("initial_information", |c| c.initial_information = 0.0),
