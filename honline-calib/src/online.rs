@@ -190,14 +190,14 @@ pub struct OnlineConfig {
     /// middle finger for ≈ 60 frames, and with the tolerance the fingers pass through each
     /// other and stay exchanged for ≈ 150 frames more (`crossing` ToF 4.07 → 5.92, structured
     /// light 1.72 → 5.56; `axis_interaction` ToF 2.50 → 8.29). The library's ToF motions sum
-    /// 23.30 → 29.29 (14 of 16 better), structured light 13.75 → 14.83 (15 of 16). The
+    /// 23.30 → 29.29 (9 better, 2 worse), structured light 13.75 → 14.83 (8 better, 1 worse). The
     /// crossing's outcome is fragile either way (other noise seeds: 4.81 → 6.48, 6.97 → 6.26;
     /// `axis_interaction` 2.17 → 2.05, 4.72 → 4.79). Tolerating only nearly parallel pills lost
     /// the fist's gain too (1.92–2.48 mm) and not the crossing (ToF 7.40 mm); a tolerance that
     /// fades for deep penetration (`(p² − t²)/p`) kept the fist (0.52 mm) but not the
     /// structured-light crossing (5.56 mm); refusing the shape step on
     /// frames in contact (collision energy above 0.3 / 1 mm of penetration) refused 545 / 200
-    /// of the ToF teaser's 700 frames and fixed one fist cut of two.
+    /// of the library's 2 626 ToF teaser frames and fixed one fist cut of two.
     pub collision_tolerance: f64,
 }
 
