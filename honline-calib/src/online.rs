@@ -180,7 +180,7 @@ pub struct OnlineConfig {
     /// pull the finger bases back under the fingers: on the library's noise-free `fist` cut
     /// from frame 45, online calibration started at the true shape walked `pinky_base_x`
     /// 27 → 17 mm and `index_middle_length` 23 → 29 mm (mean keypoint error 2.06 mm against
-    /// 0.47 for the Ch. 3 tracker; 0.50 mm at 2 mm tolerance; `tests/hard_poses.rs`).
+    /// 0.47 for the Ch. 3 tracker; 0.52 mm at 2 mm tolerance; `tests/hard_poses.rs`).
     ///
     /// Why it is not the default (session 35, `hands track --calibrate online`, mean keypoint
     /// error summed, 0 → 2 mm): cold starts of 90 frames gain (74 ToF cuts 169.18 → 161.04, 22
