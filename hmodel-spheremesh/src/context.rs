@@ -100,6 +100,8 @@ pub struct TrackingCtx<'m> {
     ray_entries: Vec<(u32, u32, Vector3<f64>)>,
     /// The points whose entry is cast one by one (no rendering, or off their pixel's ray).
     ray_cast: Vec<u32>,
+    /// `(point, footpoint)` of the entries within the gate not yet registered.
+    ray_pending: Vec<(u32, Projection)>,
     /// Per point, whether it was registered along its ray before the closest points were
     /// sought (and so has none; [`TrackingCtx::settle_entries`]).
     settled: Vec<bool>,
@@ -251,6 +253,7 @@ impl<'m> TrackingCtx<'m> {
             ray_hits: Vec::new(),
             ray_entries: Vec::new(),
             ray_cast: Vec::new(),
+            ray_pending: Vec::new(),
             settled: Vec::new(),
             along_ray_points: 0,
             irls,
@@ -456,6 +459,7 @@ impl<'m> TrackingCtx<'m> {
         self.settled.resize(self.points.len(), false);
         self.ray_entries.clear();
         self.ray_cast.clear();
+        self.ray_pending.clear();
         self.along_ray_points = 0;
         if let Some(gate) = self.ray_gate {
             if !self.render_entries() {
@@ -561,26 +565,32 @@ impl<'m> TrackingCtx<'m> {
     /// a front-facing substitute the bound does not hold (a point behind a finger's middle,
     /// its ray entering the finger's front); such a point is registered at its entry as well:
     /// the slide guards against rays that enter another part in front, which lie farther.
-    /// The other entries stay in `ray_entries` for [`TrackingCtx::register_along_rays`].
+    /// The other footpoints stay in `ray_pending` for [`TrackingCtx::register_along_rays`].
     fn settle_entries(&mut self, gate: f64) {
+        self.take_footpoints(gate);
         let half = 0.5 * self.ray_slide;
-        let mut k = 0;
-        while k < self.ray_entries.len() {
-            let (i, element, entry) = self.ray_entries[k];
-            let i = i as usize;
-            let q = self.entry_footpoint(i, element, &entry, gate);
-            match q {
-                Some(q) if (q.point - self.points[i]).norm() <= half => {
-                    self.register_at(i, q);
-                    self.settled[i] = true;
-                    self.ray_entries.swap_remove(k);
-                }
-                Some(_) => k += 1,
-                None => {
-                    self.ray_entries.swap_remove(k);
-                }
+        let mut pending = std::mem::take(&mut self.ray_pending);
+        pending.retain(|&(i, q)| {
+            let near = (q.point - self.points[i as usize]).norm() <= half;
+            if near {
+                self.register_at(i as usize, q);
+                self.settled[i as usize] = true;
+            }
+            !near
+        });
+        self.ray_pending = pending;
+    }
+
+    /// Moves the entries of `ray_entries` into `ray_pending` as footpoints, those whose entry
+    /// lies within `gate` of the point (each footpoint is worked out once).
+    fn take_footpoints(&mut self, gate: f64) {
+        let mut entries = std::mem::take(&mut self.ray_entries);
+        for (i, element, entry) in entries.drain(..) {
+            if let Some(q) = self.entry_footpoint(i as usize, element, &entry, gate) {
+                self.ray_pending.push((i, q));
             }
         }
+        self.ray_entries = entries;
     }
 
     /// [`TrackingCtx::set_ray_gate`]'s correspondences for the points not settled, over the
@@ -590,13 +600,11 @@ impl<'m> TrackingCtx<'m> {
     /// lost most of the gain, see the `ray_gate` docs).
     fn register_along_rays(&mut self, gate: f64) {
         self.cast_entries();
+        self.take_footpoints(gate);
         let half = 0.5 * self.ray_slide;
-        for k in 0..self.ray_entries.len() {
-            let (i, element, entry) = self.ray_entries[k];
+        let pending = std::mem::take(&mut self.ray_pending);
+        for &(i, q) in &pending {
             let i = i as usize;
-            let Some(q) = self.entry_footpoint(i, element, &entry, gate) else {
-                continue;
-            };
             let near = (q.point - self.points[i]).norm() <= half;
             let slid = |c: &Projection| (c.point - q.point).norm() > self.ray_slide;
             if !near && self.correspondences[i].is_some_and(|c| slid(&c)) {
@@ -604,6 +612,7 @@ impl<'m> TrackingCtx<'m> {
             }
             self.register_at(i, q);
         }
+        self.ray_pending = pending;
     }
 
     /// The entries of the points' camera rays into the model, from one rendering of their
