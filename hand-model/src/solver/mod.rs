@@ -86,7 +86,7 @@ pub use blocks::{PackedBlocks, BLOCK_DOFS, MAX_BLOCKS};
 pub use digits::{digit_variants, DIGITS, DIGIT_FLEXION_LEVELS};
 pub use frame_loop::{
     FrameLoop, FrameOutcome, Hypothesis, ScoreTrigger, TrackingProblem, CONFIRM_FRAMES,
-    RECHECK_FRAMES,
+    PLACEMENT_SOLVES, RECHECK_FRAMES,
 };
 pub use irls::IrlsParams;
 pub use lm::{
