@@ -238,8 +238,8 @@ pub const RECHECK_FRAMES: usize = 10;
 /// - the library's 16 ToF motions from frame 0: online calibration 23.30 → 23.15 mm,
 ///   sphere-mesh 20.02 → 19.98, cylinders 32.93 → 33.39 (`crossing` 3.02 → 3.82, re-placed
 ///   after losing the crossed fingers);
-/// - 2 solves: cylinders ToF cold starts 339.71 mm; 4: 285.70, at a third more cost per
-///   placement.
+/// - 2 solves: cylinders ToF cold starts 339.71 mm; 4: cylinders 285.70, but sphere-mesh
+///   140.35 (a random subject from frame 163 4.46 → 13.15 mm), at a third more cost.
 pub const PLACEMENT_SOLVES: usize = 3;
 
 impl FrameLoop {
