@@ -221,12 +221,13 @@ pub const RECHECK_FRAMES: usize = 10;
 /// 1 rigid + 7 iterations of a tracked frame) stops before a hand turned edge-on has come
 /// round: the Ch. 2 cylinders placed a ToF hand turned 65° (`rotation_slow` from frame 165)
 /// with the fingers pitched 40 mm toward the camera and tracked it 27 mm off; started at the
-/// true pose they held it within 2 mm. Whether the backups are needed is still judged after
-/// the first solve: the further solves also bring a palm-on start out of its poor placement
-/// into a pose that is no longer poor but wrong, where the edge-on backup fits (`calibration`
-/// from frame 250: 3.03 → 23.03 mm judged after three). The backups get one solve: solved
-/// longer, the wrong one of a fist's two edge-on rolls won (`rotating_fist` from frame 105:
-/// 3.49 → 18.77 mm), and as equals of the palm-on starts the edge-on ones won on fists.
+/// true pose they held it within 2 mm. Whether the backups are needed is judged after the
+/// first solve as well as after the last: the further solves also bring a palm-on start out
+/// of its poor placement into a pose that is no longer poor but wrong, where the edge-on
+/// backup fits (`calibration` from frame 250: 3.03 → 23.03 mm judged after the last solve
+/// alone). The backups get one solve: solved longer, the wrong one of a fist's two edge-on
+/// rolls won (`rotating_fist` from frame 105: 3.49 → 18.77 mm), and as equals of the palm-on
+/// starts the edge-on ones won on fists.
 ///
 /// Measured on 74 cold starts (16 library motions from frames 45–250 and 10 random subjects,
 /// 90 frames each), mean keypoint error summed, 1 → 3 solves:
@@ -581,7 +582,8 @@ impl FrameLoop {
 
     /// The best of `starts` solved by `solve` as (score, pose, poor placement): each start
     /// solved [`PLACEMENT_SOLVES`] times in a row; the backups once, only when the best of the
-    /// others after its first solve is a poor placement, and then only one that is not.
+    /// others is a poor placement after its first solve or after its last, and then only one
+    /// that is not.
     fn best_start<P: TrackingProblem>(
         &self,
         problem: &mut P,
@@ -601,8 +603,8 @@ impl FrameLoop {
             if first_look.is_none_or(|b| s < b.0) {
                 first_look = Some((s, poor));
             }
-            let converged = (1..PLACEMENT_SOLVES).all(|_| solve(problem, &mut pose));
-            if !converged || !problem.refresh(&pose) {
+            let solved = (1..PLACEMENT_SOLVES).all(|_| solve(problem, &mut pose));
+            if !solved || !problem.refresh(&pose) {
                 continue;
             }
             let (s, poor) = self.judge(problem);
@@ -610,7 +612,7 @@ impl FrameLoop {
                 best = Some((s, pose, poor));
             }
         }
-        if first_look.is_some_and(|(_, poor)| !poor) {
+        if first_look.is_some_and(|(_, poor)| !poor) && best.as_ref().is_some_and(|b| !b.2) {
             return best;
         }
         for h in backups {
@@ -770,9 +772,9 @@ mod tests {
     }
 
     /// A start that one solve leaves short of the hand is solved [`PLACEMENT_SOLVES`] times;
-    /// whether the backups are needed is judged after its first solve, so that a start the
-    /// further solves bring out of its poor placement, not onto the hand, does not shut out a
-    /// backup that fits.
+    /// whether the backups are needed is judged after its first solve and after its last, so
+    /// that a start the further solves bring out of its poor placement, not onto the hand,
+    /// does not shut out a backup that fits, nor one they bring into a poor placement.
     #[test]
     fn a_placement_is_solved_until_it_arrives() {
         let mut toy = Toy::new(0.0, 0.5, vec![(2.2, false)]);
@@ -783,6 +785,19 @@ mod tests {
         // Poor after one solve (far outside), no longer poor but 1 off after three.
         toy.starts = vec![(4.0, false), (0.3, true)];
         toy.outside = |offset| if offset.abs() > 2.5 { 0.3 } else { 0.0 };
+        toy.solves = 0;
+        let mut fl = FrameLoop::new(Pose { values: vec![9.0] }, LossParams::default());
+        assert_eq!(fl.step(&mut toy, 500).flags, ["reinitialized"]);
+        assert_eq!((toy.solves, fl.pose.values[0]), (PLACEMENT_SOLVES + 1, 0.0));
+        // Not poor after one solve, poor after the last (0.8 off): the backup is solved too.
+        toy.starts = vec![(3.8, false), (0.3, true)];
+        toy.outside = |offset| {
+            if (0.5..1.5).contains(&offset.abs()) {
+                0.3
+            } else {
+                0.0
+            }
+        };
         toy.solves = 0;
         let mut fl = FrameLoop::new(Pose { values: vec![9.0] }, LossParams::default());
         assert_eq!(fl.step(&mut toy, 500).flags, ["reinitialized"]);
