@@ -235,7 +235,8 @@ pub const RECHECK_FRAMES: usize = 10;
 ///   10 mm 8 → 6), sphere-mesh 152.57 → 137.39 (50 better, none worse), online calibration
 ///   169.18 → 154.96 (56 better, none worse);
 /// - noise-free: cylinders 398.74 → 302.46 mm (61 better, 5 worse; above 10 mm 10 → 7),
-///   online calibration 113.68 → 102.11 (35 better, 6 worse);
+///   sphere-mesh 112.69 → 100.48 (31 better, 3 worse), online calibration 113.68 → 102.11
+///   (35 better, 6 worse);
 /// - the library's 16 ToF motions from frame 0: online calibration 23.30 → 23.15 mm,
 ///   sphere-mesh 20.02 → 19.98, cylinders 32.93 → 33.39 (`crossing` 3.02 → 3.82, re-placed
 ///   after losing the crossed fingers);
