@@ -199,6 +199,37 @@ pub struct OnlineConfig {
     /// frames in contact (collision energy above 0.3 / 1 mm of penetration) refused 545 / 200
     /// of the library's 2 626 ToF teaser frames and fixed one fist cut of two.
     pub collision_tolerance: f64,
+    /// On how many of the last iterations of each frame's joint solve (and its evaluation after
+    /// the last update) the correspondences are registered along the camera rays, on the frames
+    /// where [`Self::tracker`]'s `ray_gate` runs (noisy depth); the earlier iterations take the
+    /// thesis' closest points. 0: along the rays on every iteration, as the Ch. 3 tracker
+    /// (default 1; the Ch. 3 tracker that places the hand and searches its digits keeps its
+    /// own rule).
+    ///
+    /// Why (beyond the thesis, session 37): registered along the rays, a point is pulled onto the
+    /// part of the model its ray enters first, and while a frame's solve is still converging
+    /// that is often the wrong part (a finger in front of another, a shape still far off). The
+    /// closest points converge the pose; the along-ray registration on the last iteration then
+    /// takes the closest points' noise bias out of the final pose and out of the Laplace
+    /// measurement (Eq. 4.5), which is linearized there. Measured under ToF (`hands track
+    /// --calibrate online`, mean keypoint error summed; every iteration → the last one):
+    /// - the library's 16 motions from frame 0: 23.15 → 21.39 mm (15 better, none worse by
+    ///   more than 0.05 mm); the same motions performed by random subjects (seeds 41–56): 47.16
+    ///   → 42.06 mm (12 better, none worse);
+    /// - the random subjects 7–12 (`eval/tests/ch4_acceptance.rs`, last-third keypoint
+    ///   error over the true template's): 1.56 / 1.24 / 1.10 / 1.78 / 1.21 / 1.56 → 1.60 / 1.19
+    ///   / 1.05 / 1.69 / 1.23 / 1.48, E_β at the end 0.31–0.41 → 0.29–0.37 mm;
+    /// - the 74 ToF cold starts (the library's motions and random subjects cut at frames
+    ///   45–250, 90 frames each): 154.96 → 145.27 mm (55 better, 3 worse);
+    /// - the frame: 9.1 → 6.4 ms (`hands bench --model online`, ToF teaser).
+    ///
+    /// On no iteration (closest points only): the library 21.11 mm and the random subjects'
+    /// motions 34.03 mm (a fragile `axis_interaction` 8.14 → 2.27), 6.0 ms a frame, but the
+    /// shape came out worse (E_β 0.50–0.55 mm; ratios 1.73 / 1.28 / 1.08 / 1.91 / 1.35 / 1.53)
+    /// and the cold starts too (158.76 mm, 41 worse). The rule is the calibrator's alone: the
+    /// Ch. 3 tracker with a fixed shape lost by it (its 74 ToF cold starts 137.39 → 154.08 mm,
+    /// 54 worse), so a shape still moving is what the early along-ray registrations mislead.
+    pub ray_last_iterations: usize,
 }
 
 /// The share of the silhouette's area under which [`OnlineConfig::outside_gate`] refuses no
@@ -230,6 +261,7 @@ impl Default for OnlineConfig {
             innovation_gate: 6.0,
             outside_gate: 3.0,
             collision_tolerance: 0.0,
+            ray_last_iterations: 1,
         }
     }
 }
@@ -337,6 +369,10 @@ struct ShapeCallback<'a> {
     rejected: usize,
     reshape_us: f64,
     correspondences_us: f64,
+    /// The frame's along-ray gate, and on how many last iterations it runs (0: on all;
+    /// [`OnlineConfig::ray_last_iterations`]).
+    ray_gate: Option<f64>,
+    ray_last: usize,
 }
 
 impl LmCallback<OnlineCtx> for ShapeCallback<'_> {
@@ -358,6 +394,10 @@ impl LmCallback<OnlineCtx> for ShapeCallback<'_> {
         self.problem.reshape(ctx)?;
         let t1 = Instant::now();
         self.reshape_us += (t1 - t).as_secs_f64() * 1e6;
+        let along = self.ray_last == 0
+            || info.final_evaluation
+            || info.iteration + self.ray_last >= self.iterations;
+        ctx.tracking.set_ray_gate(self.ray_gate.filter(|_| along));
         let r = ctx.tracking.update(pose, info.rigid_only);
         self.correspondences_us += t1.elapsed().as_secs_f64() * 1e6;
         r
@@ -947,6 +987,8 @@ impl<'m> OnlineCalibrator<'m> {
                 rejected: 0,
                 reshape_us: 0.0,
                 correspondences_us: 0.0,
+                ray_gate: self.ctx.tracking.ray_gate(),
+                ray_last: self.config.ray_last_iterations,
             };
             let mut pose = self.pose.clone();
             self.problem.data.capture_next(false);
@@ -960,6 +1002,7 @@ impl<'m> OnlineCalibrator<'m> {
                 &mut callback,
             );
             let lm_us = t0.elapsed().as_secs_f64() * 1e6;
+            self.ctx.tracking.set_ray_gate(callback.ray_gate);
             self.next = callback.next;
             let ok = matches!(result, Ok(r) if r.termination.was_successful())
                 && pose.values.iter().all(|v| v.is_finite());

@@ -393,3 +393,44 @@ fn heavy_depth_noise_is_not_taken_for_a_lost_hand() {
     assert_eq!(lost(true), 0);
     assert_eq!(lost(false), 6);
 }
+
+/// [`OnlineConfig::ray_last_iterations`]: on noisy depth the along-ray registration runs on
+/// the last iterations of each frame's solve only. 0 and any count of at least the solve's
+/// iterations both mean every iteration (the same estimate, bit for bit); the last iteration
+/// alone gives another estimate than every iteration, and another than none (the tracker's
+/// `ray_gate` off), so it does run there.
+#[test]
+fn along_ray_registration_on_the_last_iterations() {
+    let base = default_right_hand();
+    let (_, truth) = subject(&base, 0.1, 4);
+    let camera = Camera::sr300_qvga();
+    let run = |config: OnlineConfig| {
+        let mut calib = OnlineCalibrator::new(&base, config, None).unwrap();
+        calib.set_pose(&pose(&truth, 0, true)).unwrap();
+        let mut beta = Vec::new();
+        for k in 0..6 {
+            let exact = rendered_frame(&truth, &pose(&truth, k, true), &camera, 1500).unwrap();
+            let frame = hmodel_spheremesh::synthetic::noisy_frame(&exact, 5.0, k as u64);
+            let out = calib.track(&frame, k as u64, k as f64 / 30.0);
+            assert!(
+                out.record.energies["depth_noise_mm"] > 1.5,
+                "noisy enough to run"
+            );
+            beta = out.beta;
+        }
+        beta
+    };
+    let with = |last: usize| OnlineConfig {
+        ray_last_iterations: last,
+        ..OnlineConfig::default()
+    };
+    let iterations = OnlineConfig::default().tracker.lm.iterations;
+    let every = run(with(0));
+    assert_eq!(every, run(with(iterations)));
+    let last = run(with(1));
+    assert_ne!(last, every);
+    let mut none = with(1);
+    none.tracker.ray_gate = None;
+    assert_ne!(last, run(none));
+    assert!(last.iter().all(|b| b.is_finite()));
+}
