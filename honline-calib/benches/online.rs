@@ -322,6 +322,13 @@
 //! With the bounding-ball test also without its square root, at the session's end: the plain
 //! frame 9 682 µs, the online frame 9 156 µs (closest points 1 817, along-ray 4 500, m2d
 //! 1 039, solve 1 342). Under ToF the goal of 200 frames/s is not met: ≈ 105–110 frames/s.
+//!
+//! Session 37: the calibrator registers along the rays on each frame's last iteration only
+//! (`OnlineConfig::ray_last_iterations`, for its tracking, see there). `hands bench --model
+//! online`, two runs each, alternating with the session's starting binary: the online frame
+//! 8 913 / 9 080 → 6 615 / 6 588 µs (≈ 0.73×; along-ray 4 172 / 4 293 → 654 / 648 µs, closest
+//! points 1 851 / 1 880 → 3 116 / 3 097 µs, now the largest stage), ≈ 90 → 110 frames/s over
+//! the whole run. Still short of 200 frames/s under ToF.
 
 #[path = "../tests/common/mod.rs"]
 mod common;
