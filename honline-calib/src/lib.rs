@@ -250,7 +250,7 @@
 //!   52.39 mm, `rotating_fist` 6.23 → 10.22: the prior is what holds a shape through hard
 //!   motions on another hand too). Registering along the rays on the last iteration of each
 //!   frame only ([`OnlineConfig::ray_last_iterations`]) tracks better on every set measured and
-//!   takes the ToF frame 9.1 → 6.4 ms; the ratios 1.60 / 1.19 / 1.05 / 1.69 / 1.23 / 1.48.
+//!   takes the ToF frame 9.1 → 6.6 ms; the ratios 1.60 / 1.19 / 1.05 / 1.69 / 1.23 / 1.48.
 //! - The acceptance motion (`eval::online::CalibrationMotion`: each MCP a quarter period ahead
 //!   of its PIP and DIP, so that the phalanges are seen bent one at a time) leaves the PCA
 //!   pose prior's subspace, so the prior's pull, not the shape, sets most of the reference's

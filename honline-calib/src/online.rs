@@ -221,7 +221,7 @@ pub struct OnlineConfig {
     ///   / 1.05 / 1.69 / 1.23 / 1.48, E_β at the end 0.31–0.41 → 0.29–0.37 mm;
     /// - the 74 ToF cold starts (the library's motions and random subjects cut at frames
     ///   45–250, 90 frames each): 154.96 → 145.27 mm (55 better, 3 worse);
-    /// - the frame: 9.1 → 6.4 ms (`hands bench --model online`, ToF teaser).
+    /// - the frame: 9.1 → 6.6 ms (`hands bench --model online`, ToF teaser).
     ///
     /// On no iteration (closest points only): the library 21.11 mm and the random subjects'
     /// motions 34.03 mm (a fragile `axis_interaction` 8.14 → 2.27), 6.0 ms a frame, but the
