@@ -223,11 +223,12 @@ pub struct OnlineConfig {
     ///   45–250, 90 frames each): 154.96 → 145.27 mm (55 better, 3 worse);
     /// - the frame: 9.1 → 6.6 ms (`hands bench --model online`, ToF teaser).
     ///
-    /// On no iteration (closest points only): the library 21.11 mm and the random subjects'
-    /// motions 34.03 mm (a fragile `axis_interaction` 8.14 → 2.27), 6.0 ms a frame, but the
-    /// shape came out worse (E_β 0.50–0.55 mm; ratios 1.73 / 1.28 / 1.08 / 1.91 / 1.35 / 1.53)
-    /// and the cold starts too (158.76 mm, 41 worse). The rule is the calibrator's alone: the
-    /// Ch. 3 tracker with a fixed shape lost by it (its 74 ToF cold starts 137.39 → 154.08 mm,
+    /// On the last two: the library 21.94 mm, the random subjects' motions 44.89 mm (`crossing`
+    /// 5.11 → 9.47). On no iteration (closest points only): the library 21.11 mm and the random
+    /// subjects' motions 34.03 mm (a fragile `axis_interaction` 8.14 → 2.27), 6.0 ms a frame,
+    /// but the shape came out worse (E_β 0.50–0.55 mm; ratios 1.73 / 1.28 / 1.08 / 1.91 / 1.35
+    /// / 1.53) and the cold starts too (158.76 mm, 41 worse). The rule is the calibrator's alone:
+    /// the Ch. 3 tracker with a fixed shape lost by it (its 74 ToF cold starts 137.39 → 154.08 mm,
     /// 54 worse), so a shape still moving is what the early along-ray registrations mislead.
     pub ray_last_iterations: usize,
 }
