@@ -85,6 +85,8 @@ pub struct TrackingCtx<'m> {
     /// How far an along-ray footpoint may lie from the closest point (see
     /// [`TrackingCtx::set_ray_slide`]).
     ray_slide: f64,
+    /// [`TrackingCtx::set_point_stride`].
+    point_stride: usize,
     /// The posed elements prepared for [`TrackingCtx::set_ray_gate`]'s ray casts.
     prepared: Vec<Option<PreparedElement>>,
     /// `(pixel, point)` for every point of the frame, by pixel: the along-ray correspondences
@@ -246,6 +248,7 @@ impl<'m> TrackingCtx<'m> {
             front_facing: true,
             ray_gate: None,
             ray_slide: DEFAULT_RAY_SLIDE,
+            point_stride: 1,
             prepared: Vec::new(),
             ray_pixels: Vec::new(),
             ray_mask: PixelRuns::default(),
@@ -423,6 +426,17 @@ impl<'m> TrackingCtx<'m> {
         self.ray_slide = if slide.is_nan() { -1.0 } else { slide };
     }
 
+    /// Register every `stride`-th point only (1, the default: every point; 0 counts as 1): the
+    /// others carry no correspondence at the next [`update`](Self::update)s, and each point
+    /// registered weighs `stride`, so that the data term keeps its scale against the priors. A
+    /// solve's early iterations only bring the pose near the data: with a stride there they
+    /// cost a fraction of the closest-point search and of the data rows (the online
+    /// calibrator's `early_point_stride`). The skipped points' coherence is worn by the motion
+    /// they missed, so their next search is as exact as ever.
+    pub fn set_point_stride(&mut self, stride: usize) {
+        self.point_stride = stride.max(1);
+    }
+
     /// Re-pose the model at `pose` and recompute, for every sensor point, its correspondence
     /// `q = Π_M(p)` (front-facing when enabled), the unit direction `u = (p − q)/‖p − q‖` of the
     /// residual (the surface normal where `p` lies on the surface), the residual `r = uᵀ(q − p)
@@ -457,6 +471,13 @@ impl<'m> TrackingCtx<'m> {
         // closest point (`settle_entries`).
         self.settled.clear();
         self.settled.resize(self.points.len(), false);
+        if self.point_stride > 1 {
+            for i in (0..self.points.len()).filter(|i| i % self.point_stride != 0) {
+                self.settled[i] = true;
+                self.correspondences[i] = None;
+                (self.residuals[i], self.weights[i]) = (0.0, 0.0);
+            }
+        }
         self.ray_entries.clear();
         self.ray_cast.clear();
         self.ray_pending.clear();
@@ -523,7 +544,7 @@ impl<'m> TrackingCtx<'m> {
                 self.irls.weight(len)
             } else {
                 1.0
-            };
+            } * self.point_stride as f64;
         }
     }
 
@@ -551,7 +572,7 @@ impl<'m> TrackingCtx<'m> {
             self.irls.weight(res.abs())
         } else {
             1.0
-        };
+        } * self.point_stride as f64;
         self.correspondences[i] = Some(q);
         self.along_ray_points += 1;
     }
@@ -586,6 +607,9 @@ impl<'m> TrackingCtx<'m> {
     fn take_footpoints(&mut self, gate: f64) {
         let mut entries = std::mem::take(&mut self.ray_entries);
         for (i, element, entry) in entries.drain(..) {
+            if i as usize % self.point_stride != 0 {
+                continue;
+            }
             if let Some(q) = self.entry_footpoint(i as usize, element, &entry, gate) {
                 self.ray_pending.push((i, q));
             }
@@ -1086,6 +1110,53 @@ mod tests {
                 (rendered.residuals()[i] - cast.residuals()[i]).abs() < 1e-9,
                 "point {i}"
             );
+        }
+    }
+
+    /// With a point stride k only every k-th point is registered, as it would be without the
+    /// stride (the same footpoint and residual) and weighing k; the others carry nothing. With
+    /// and without the along-ray registration, and back to stride 1 every point is again.
+    #[test]
+    fn a_point_stride_registers_every_kth_point_weighing_k() {
+        let t = default_right_hand();
+        let sk = &t.skeleton;
+        let camera = Camera::sr300_qvga();
+        let at = |flex: f64| {
+            Pose::from_named(sk, [("global_tz", 400.0), ("index_mcp_flex", flex)]).unwrap()
+        };
+        let mut frame = rendered_frame(&t, &at(0.5), &camera, 2000).unwrap();
+        for (i, p) in frame.points.iter_mut().enumerate() {
+            *p += p.normalize() * (3.0 * (((i * 7919) % 101) as f64 / 50.0 - 1.0));
+        }
+        let view = View::Perspective {
+            camera_center: Vector3::zeros(),
+        };
+        for gate in [None, Some(20.0)] {
+            let mut full = TrackingCtx::new(&t, view, IrlsParams::default()).unwrap();
+            full.set_frame(&frame);
+            full.set_ray_gate(gate);
+            let mut strided = full.clone();
+            strided.set_point_stride(3);
+            full.update(&at(0.45), false).unwrap();
+            strided.update(&at(0.45), false).unwrap();
+            for i in 0..frame.points.len() {
+                let (a, b) = (full.correspondences()[i], strided.correspondences()[i]);
+                if i % 3 != 0 {
+                    assert!(b.is_none() && strided.weights()[i] == 0.0, "point {i}");
+                    continue;
+                }
+                let (a, b) = (a.unwrap(), b.unwrap());
+                assert!(
+                    (a.point - b.point).norm() < 1e-9,
+                    "point {i}, gate {gate:?}"
+                );
+                assert_eq!(full.residuals()[i], strided.residuals()[i]);
+                assert_eq!(3.0 * full.weights()[i], strided.weights()[i]);
+            }
+            strided.set_point_stride(1);
+            strided.update(&at(0.45), false).unwrap();
+            assert_eq!(strided.correspondences(), full.correspondences());
+            assert_eq!(strided.weights(), full.weights());
         }
     }
 }

@@ -231,6 +231,20 @@ pub struct OnlineConfig {
     /// the Ch. 3 tracker with a fixed shape lost by it (its 74 ToF cold starts 137.39 → 154.08 mm,
     /// 54 worse), so a shape still moving is what the early along-ray registrations mislead.
     pub ray_last_iterations: usize,
+    /// On the iterations that [`Self::ray_last_iterations`] leaves to the closest points (noisy
+    /// depth only), register every this many-th point (each weighing as many; 0 or 1: every
+    /// point; `hmodel_spheremesh::TrackingCtx::set_point_stride`). Those iterations only bring
+    /// the pose near the data; the last one registers every point along its ray.
+    ///
+    /// Default 1: the speed it buys costs accuracy. Measured under ToF (session 37, 1 → 3): the
+    /// frame 6.6 → 4.7 ms (`hands bench --model online`, ToF teaser: ≥ 200 frames/s, the
+    /// issue's goal), the library's 16 motions 21.39 → 22.46 mm (12 worse by more than 0.05
+    /// mm, none better), the same motions by random subjects 42.06 → 40.48 mm (9 worse, 2 better:
+    /// a fragile `axis_interaction` 8.19 → 5.80), the random subjects 7–12 1.60 / 1.19 /
+    /// 1.05 / 1.69 / 1.23 / 1.48 → 1.63 / 1.19 / 1.08 / 1.73 / 1.28 / 1.54 (stride 2: 5.0 ms,
+    /// 1.61 / 1.23 / 1.05 / 1.74 / 1.27 / 1.50). A `--config` file holding
+    /// `{"early_point_stride": 3}` is the real-time setting.
+    pub early_point_stride: usize,
 }
 
 /// The share of the silhouette's area under which [`OnlineConfig::outside_gate`] refuses no
@@ -263,6 +277,7 @@ impl Default for OnlineConfig {
             outside_gate: 3.0,
             collision_tolerance: 0.0,
             ray_last_iterations: 1,
+            early_point_stride: 1,
         }
     }
 }
@@ -374,6 +389,8 @@ struct ShapeCallback<'a> {
     /// [`OnlineConfig::ray_last_iterations`]).
     ray_gate: Option<f64>,
     ray_last: usize,
+    /// [`OnlineConfig::early_point_stride`].
+    early_stride: usize,
 }
 
 impl LmCallback<OnlineCtx> for ShapeCallback<'_> {
@@ -399,6 +416,9 @@ impl LmCallback<OnlineCtx> for ShapeCallback<'_> {
             || info.final_evaluation
             || info.iteration + self.ray_last >= self.iterations;
         ctx.tracking.set_ray_gate(self.ray_gate.filter(|_| along));
+        let early = !along && self.ray_gate.is_some();
+        ctx.tracking
+            .set_point_stride(if early { self.early_stride } else { 1 });
         let r = ctx.tracking.update(pose, info.rigid_only);
         self.correspondences_us += t1.elapsed().as_secs_f64() * 1e6;
         r
@@ -990,6 +1010,7 @@ impl<'m> OnlineCalibrator<'m> {
                 correspondences_us: 0.0,
                 ray_gate: self.ctx.tracking.ray_gate(),
                 ray_last: self.config.ray_last_iterations,
+                early_stride: self.config.early_point_stride,
             };
             let mut pose = self.pose.clone();
             self.problem.data.capture_next(false);
@@ -1004,6 +1025,7 @@ impl<'m> OnlineCalibrator<'m> {
             );
             let lm_us = t0.elapsed().as_secs_f64() * 1e6;
             self.ctx.tracking.set_ray_gate(callback.ray_gate);
+            self.ctx.tracking.set_point_stride(1);
             self.next = callback.next;
             let ok = matches!(result, Ok(r) if r.termination.was_successful())
                 && pose.values.iter().all(|v| v.is_finite());

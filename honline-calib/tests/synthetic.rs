@@ -5,7 +5,7 @@
 mod common;
 
 use common::{pose, subject};
-use hand_model::spheremesh::{default_right_hand, ShapeBasis};
+use hand_model::spheremesh::{default_right_hand, ShapeBasis, SphereMeshTemplate};
 use hmodel_spheremesh::synthetic::rendered_frame;
 use honline_calib::{beta_error, error_subset, Estimator, OnlineCalibrator, OnlineConfig};
 use sensor_io::preprocess::PreprocessedFrame;
@@ -403,23 +403,7 @@ fn heavy_depth_noise_is_not_taken_for_a_lost_hand() {
 fn along_ray_registration_on_the_last_iterations() {
     let base = default_right_hand();
     let (_, truth) = subject(&base, 0.1, 4);
-    let camera = Camera::sr300_qvga();
-    let run = |config: OnlineConfig| {
-        let mut calib = OnlineCalibrator::new(&base, config, None).unwrap();
-        calib.set_pose(&pose(&truth, 0, true)).unwrap();
-        let mut beta = Vec::new();
-        for k in 0..6 {
-            let exact = rendered_frame(&truth, &pose(&truth, k, true), &camera, 1500).unwrap();
-            let frame = hmodel_spheremesh::synthetic::noisy_frame(&exact, 5.0, k as u64);
-            let out = calib.track(&frame, k as u64, k as f64 / 30.0);
-            assert!(
-                out.record.energies["depth_noise_mm"] > 1.5,
-                "noisy enough to run"
-            );
-            beta = out.beta;
-        }
-        beta
-    };
+    let run = |config: OnlineConfig| run_noisy(&base, &truth, config, 5.0);
     let with = |last: usize| OnlineConfig {
         ray_last_iterations: last,
         ..OnlineConfig::default()
@@ -433,4 +417,55 @@ fn along_ray_registration_on_the_last_iterations() {
     none.tracker.ray_gate = None;
     assert_ne!(last, run(none));
     assert!(last.iter().all(|b| b.is_finite()));
+}
+
+/// The estimate after six frames of `truth` bending its fingers, with Gaussian depth noise
+/// `sigma` (mm; 0: exact depth).
+fn run_noisy(
+    base: &SphereMeshTemplate,
+    truth: &SphereMeshTemplate,
+    config: OnlineConfig,
+    sigma: f64,
+) -> Vec<f64> {
+    let camera = Camera::sr300_qvga();
+    let mut calib = OnlineCalibrator::new(base, config, None).unwrap();
+    calib.set_pose(&pose(truth, 0, true)).unwrap();
+    let mut beta = Vec::new();
+    for k in 0..6 {
+        let exact = rendered_frame(truth, &pose(truth, k, true), &camera, 1500).unwrap();
+        let frame = if sigma > 0.0 {
+            hmodel_spheremesh::synthetic::noisy_frame(&exact, sigma, k as u64)
+        } else {
+            exact
+        };
+        let out = calib.track(&frame, k as u64, k as f64 / 30.0);
+        let noisy = out.record.energies["depth_noise_mm"] > 1.5;
+        assert_eq!(
+            noisy,
+            sigma > 0.0,
+            "the along-ray registration runs on noisy frames"
+        );
+        beta = out.beta;
+    }
+    beta
+}
+
+/// [`OnlineConfig::early_point_stride`]: on noisy depth the early iterations register every
+/// k-th point (another estimate than with every point, still valid); on exact depth, where
+/// no iteration registers along the rays, every point always (the same estimate bit for bit).
+#[test]
+fn early_iterations_register_every_kth_point_on_noisy_depth() {
+    let base = default_right_hand();
+    let (_, truth) = subject(&base, 0.1, 4);
+    let with = |stride: usize| OnlineConfig {
+        early_point_stride: stride,
+        ..OnlineConfig::default()
+    };
+    let noisy = run_noisy(&base, &truth, with(3), 5.0);
+    assert_ne!(noisy, run_noisy(&base, &truth, with(1), 5.0));
+    assert!(noisy.iter().all(|b| b.is_finite()));
+    assert_eq!(
+        run_noisy(&base, &truth, with(3), 0.0),
+        run_noisy(&base, &truth, with(1), 0.0)
+    );
 }
