@@ -237,13 +237,13 @@ pub struct OnlineConfig {
     /// the pose near the data; the last one registers every point along its ray.
     ///
     /// Default 1: the speed it buys costs accuracy. Measured under ToF (session 37, 1 → 3): the
-    /// frame 6.6 → 4.7 ms (`hands bench --model online`, ToF teaser: ≥ 200 frames/s, the
-    /// issue's goal), the library's 16 motions 21.39 → 22.46 mm (12 worse by more than 0.05
-    /// mm, none better), the same motions by random subjects 42.06 → 40.48 mm (9 worse, 2 better:
-    /// a fragile `axis_interaction` 8.19 → 5.80), the random subjects 7–12 1.60 / 1.19 /
-    /// 1.05 / 1.69 / 1.23 / 1.48 → 1.63 / 1.19 / 1.08 / 1.73 / 1.28 / 1.54 (stride 2: 5.0 ms,
-    /// 1.61 / 1.23 / 1.05 / 1.74 / 1.27 / 1.50). A `--config` file holding
-    /// `{"early_point_stride": 3}` is the real-time setting.
+    /// frame 6.6 → 4.7 ms (`hands bench --model online`, ToF teaser: ≥ 200 frames/s, the issue's
+    /// goal), the library's 16 motions 21.39 → 22.46 mm (12 worse by more than 0.05 mm, none
+    /// better), the same motions by random subjects 42.06 → 40.48 mm (9 worse, 2 better: a fragile
+    /// `axis_interaction` 8.19 → 5.80), the 74 ToF cold starts 145.27 → 149.73 mm (48 worse, 2
+    /// better), the random subjects 7–12 1.60 / 1.19 / 1.05 / 1.69 / 1.23 / 1.48 → 1.63 /
+    /// 1.19 / 1.08 / 1.73 / 1.28 / 1.54 (stride 2: 5.0 ms, 1.61 / 1.23 / 1.05 / 1.74 / 1.27 /
+    /// 1.50). A `--config` file holding `{"early_point_stride": 3}` is the real-time setting.
     pub early_point_stride: usize,
 }
 
