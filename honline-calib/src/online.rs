@@ -391,6 +391,9 @@ struct ShapeCallback<'a> {
     ray_last: usize,
     /// [`OnlineConfig::early_point_stride`].
     early_stride: usize,
+    /// Whether the last refresh was an early one (closest points, maybe strided): a solve
+    /// stopped early ([`hand_model::solver::LmOptions::step_tolerance`]) leaves it so.
+    early_last: bool,
 }
 
 impl LmCallback<OnlineCtx> for ShapeCallback<'_> {
@@ -417,6 +420,7 @@ impl LmCallback<OnlineCtx> for ShapeCallback<'_> {
             || info.iteration + self.ray_last >= self.iterations;
         ctx.tracking.set_ray_gate(self.ray_gate.filter(|_| along));
         let early = !along && self.ray_gate.is_some();
+        self.early_last = early;
         ctx.tracking
             .set_point_stride(if early { self.early_stride } else { 1 });
         let r = ctx.tracking.update(pose, info.rigid_only);
@@ -1011,6 +1015,7 @@ impl<'m> OnlineCalibrator<'m> {
                 ray_gate: self.ctx.tracking.ray_gate(),
                 ray_last: self.config.ray_last_iterations,
                 early_stride: self.config.early_point_stride,
+                early_last: false,
             };
             let mut pose = self.pose.clone();
             self.problem.data.capture_next(false);
@@ -1027,8 +1032,13 @@ impl<'m> OnlineCalibrator<'m> {
             self.ctx.tracking.set_ray_gate(callback.ray_gate);
             self.ctx.tracking.set_point_stride(1);
             self.next = callback.next;
-            let ok = matches!(result, Ok(r) if r.termination.was_successful())
+            let mut ok = matches!(result, Ok(r) if r.termination.was_successful())
                 && pose.values.iter().all(|v| v.is_finite());
+            if ok && callback.early_last {
+                // The frame's fit and its Laplace measurement are judged on every point
+                // registered by the frame's rule, not on an early iteration's.
+                ok = self.problem.prepare(&mut self.ctx, &pose, false).is_ok();
+            }
             reshape_us += callback.reshape_us;
             rec.timing_us
                 .insert("correspondences".into(), callback.correspondences_us);

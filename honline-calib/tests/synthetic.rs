@@ -469,3 +469,35 @@ fn early_iterations_register_every_kth_point_on_noisy_depth() {
         run_noisy(&base, &truth, with(1), 0.0)
     );
 }
+
+/// A solve stopped early by its step tolerance, before the iteration that registers every point
+/// along its ray: the frame is still judged (loss criterion, Laplace measurement) on every point
+/// registered by the frame's rule, not on the early iteration's every third point.
+#[test]
+fn a_solve_stopped_early_is_judged_on_every_point() {
+    let base = default_right_hand();
+    let (_, truth) = subject(&base, 0.1, 4);
+    let camera = Camera::sr300_qvga();
+    let mut config = OnlineConfig {
+        early_point_stride: 3,
+        ..OnlineConfig::default()
+    };
+    config.tracker.lm.step_tolerance = 1e9;
+    let mut calib = OnlineCalibrator::new(&base, config, None).unwrap();
+    calib.set_pose(&pose(&truth, 0, true)).unwrap();
+    for k in 0..4 {
+        let exact = rendered_frame(&truth, &pose(&truth, k, true), &camera, 1500).unwrap();
+        let frame = hmodel_spheremesh::synthetic::noisy_frame(&exact, 5.0, k as u64);
+        let out = calib.track(&frame, k as u64, k as f64 / 30.0);
+        assert!(
+            out.record.iterations.is_some_and(|n| n < 7),
+            "stopped early"
+        );
+        assert!(
+            !out.record.flags.iter().any(|f| f == "lost"),
+            "frame {k}: {:?}",
+            out.record.flags
+        );
+        assert!(out.beta.iter().all(|b| b.is_finite()));
+    }
+}
