@@ -540,11 +540,7 @@ impl<'m> TrackingCtx<'m> {
             let len = d.norm();
             self.directions[i] = if len > 1e-9 { d / len } else { c.normal };
             self.residuals[i] = -len;
-            self.weights[i] = if self.reweighted {
-                self.irls.weight(len)
-            } else {
-                1.0
-            } * self.point_stride as f64;
+            self.weights[i] = self.point_weight(len);
         }
     }
 
@@ -563,16 +559,23 @@ impl<'m> TrackingCtx<'m> {
         self.geometry.project_on_element(element as usize, entry)
     }
 
+    /// The weight of a point registered `distance` from its footpoint: its IRLS weight on
+    /// reweighted iterations (else 1), times the point stride it stands for.
+    fn point_weight(&self, distance: f64) -> f64 {
+        let w = if self.reweighted {
+            self.irls.weight(distance)
+        } else {
+            1.0
+        };
+        w * self.point_stride as f64
+    }
+
     /// Registers point `i` at the along-ray footpoint `q`, point-to-plane.
     fn register_at(&mut self, i: usize, q: Projection) {
         let res = q.normal.dot(&(q.point - self.points[i]));
         self.directions[i] = q.normal;
         self.residuals[i] = res;
-        self.weights[i] = if self.reweighted {
-            self.irls.weight(res.abs())
-        } else {
-            1.0
-        } * self.point_stride as f64;
+        self.weights[i] = self.point_weight(res.abs());
         self.correspondences[i] = Some(q);
         self.along_ray_points += 1;
     }
