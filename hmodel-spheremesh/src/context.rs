@@ -87,6 +87,8 @@ pub struct TrackingCtx<'m> {
     ray_slide: f64,
     /// [`TrackingCtx::set_point_stride`].
     point_stride: usize,
+    /// [`TrackingCtx::set_point_phase`].
+    point_phase: usize,
     /// The posed elements prepared for [`TrackingCtx::set_ray_gate`]'s ray casts.
     prepared: Vec<Option<PreparedElement>>,
     /// `(pixel, point)` for every point of the frame, by pixel: the along-ray correspondences
@@ -249,6 +251,7 @@ impl<'m> TrackingCtx<'m> {
             ray_gate: None,
             ray_slide: DEFAULT_RAY_SLIDE,
             point_stride: 1,
+            point_phase: 0,
             prepared: Vec::new(),
             ray_pixels: Vec::new(),
             ray_mask: PixelRuns::default(),
@@ -437,6 +440,20 @@ impl<'m> TrackingCtx<'m> {
         self.point_stride = stride.max(1);
     }
 
+    /// Which points a [`set_point_stride`](Self::set_point_stride) registers: those whose
+    /// index is `phase` modulo the stride (default 0). Stepping the phase from one iteration
+    /// to the next lets every point pull on the pose over `stride` iterations; the online
+    /// calibrator's early iterations do (a fixed share cost ≈ 5 % of its keypoint accuracy
+    /// under ToF, none with the phase stepped).
+    pub fn set_point_phase(&mut self, phase: usize) {
+        self.point_phase = phase;
+    }
+
+    /// Whether point `i` is registered under the point stride.
+    fn strided(&self, i: usize) -> bool {
+        i % self.point_stride == self.point_phase % self.point_stride
+    }
+
     /// Re-pose the model at `pose` and recompute, for every sensor point, its correspondence
     /// `q = Π_M(p)` (front-facing when enabled), the unit direction `u = (p − q)/‖p − q‖` of the
     /// residual (the surface normal where `p` lies on the surface), the residual `r = uᵀ(q − p)
@@ -472,7 +489,10 @@ impl<'m> TrackingCtx<'m> {
         self.settled.clear();
         self.settled.resize(self.points.len(), false);
         if self.point_stride > 1 {
-            for i in (0..self.points.len()).filter(|i| i % self.point_stride != 0) {
+            for i in 0..self.points.len() {
+                if self.strided(i) {
+                    continue;
+                }
                 self.settled[i] = true;
                 self.correspondences[i] = None;
                 (self.residuals[i], self.weights[i]) = (0.0, 0.0);
@@ -610,7 +630,7 @@ impl<'m> TrackingCtx<'m> {
     fn take_footpoints(&mut self, gate: f64) {
         let mut entries = std::mem::take(&mut self.ray_entries);
         for (i, element, entry) in entries.drain(..) {
-            if i as usize % self.point_stride != 0 {
+            if !self.strided(i as usize) {
                 continue;
             }
             if let Some(q) = self.entry_footpoint(i as usize, element, &entry, gate) {
@@ -1116,9 +1136,10 @@ mod tests {
         }
     }
 
-    /// With a point stride k only every k-th point is registered, as it would be without the
-    /// stride (the same footpoint and residual) and weighing k; the others carry nothing. With
-    /// and without the along-ray registration, and back to stride 1 every point is again.
+    /// With a point stride k only every k-th point is registered — those whose index is the
+    /// phase modulo k — as it would be without the stride (the same footpoint and residual)
+    /// and weighing k; the others carry nothing. With and without the along-ray registration,
+    /// and back to stride 1 every point is again.
     #[test]
     fn a_point_stride_registers_every_kth_point_weighing_k() {
         let t = default_right_hand();
@@ -1139,22 +1160,23 @@ mod tests {
             full.set_frame(&frame);
             full.set_ray_gate(gate);
             let mut strided = full.clone();
-            strided.set_point_stride(3);
             full.update(&at(0.45), false).unwrap();
-            strided.update(&at(0.45), false).unwrap();
-            for i in 0..frame.points.len() {
-                let (a, b) = (full.correspondences()[i], strided.correspondences()[i]);
-                if i % 3 != 0 {
-                    assert!(b.is_none() && strided.weights()[i] == 0.0, "point {i}");
-                    continue;
+            strided.set_point_stride(3);
+            for phase in [0, 1, 5] {
+                strided.set_point_phase(phase);
+                strided.update(&at(0.45), false).unwrap();
+                for i in 0..frame.points.len() {
+                    let (a, b) = (full.correspondences()[i], strided.correspondences()[i]);
+                    if i % 3 != phase % 3 {
+                        assert!(b.is_none() && strided.weights()[i] == 0.0, "point {i}");
+                        continue;
+                    }
+                    let (a, b) = (a.unwrap(), b.unwrap());
+                    let at = format!("point {i}, gate {gate:?}, phase {phase}");
+                    assert!((a.point - b.point).norm() < 1e-9, "{at}");
+                    assert_eq!(full.residuals()[i], strided.residuals()[i], "{at}");
+                    assert_eq!(3.0 * full.weights()[i], strided.weights()[i], "{at}");
                 }
-                let (a, b) = (a.unwrap(), b.unwrap());
-                assert!(
-                    (a.point - b.point).norm() < 1e-9,
-                    "point {i}, gate {gate:?}"
-                );
-                assert_eq!(full.residuals()[i], strided.residuals()[i]);
-                assert_eq!(3.0 * full.weights()[i], strided.weights()[i]);
             }
             strided.set_point_stride(1);
             strided.update(&at(0.45), false).unwrap();

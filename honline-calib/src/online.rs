@@ -233,17 +233,26 @@ pub struct OnlineConfig {
     pub ray_last_iterations: usize,
     /// On the iterations that [`Self::ray_last_iterations`] leaves to the closest points (noisy
     /// depth only), register every this many-th point (each weighing as many; 0 or 1: every
-    /// point; `hmodel_spheremesh::TrackingCtx::set_point_stride`). Those iterations only bring
-    /// the pose near the data; the last one registers every point along its ray.
+    /// point; `hmodel_spheremesh::TrackingCtx::set_point_stride`), each iteration the next share
+    /// of them (`set_point_phase`: the points whose index is the iteration modulo the stride), so
+    /// that over those iterations every point pulls on the pose. Those iterations only bring the
+    /// pose near the data; the last one registers every point along its ray.
     ///
-    /// Default 1: the speed it buys costs accuracy. Measured under ToF (session 37, 1 → 3): the
-    /// frame 6.6 → 4.7 ms (`hands bench --model online`, ToF teaser: ≥ 200 frames/s, the issue's
-    /// goal), the library's 16 motions 21.39 → 22.46 mm (12 worse by more than 0.05 mm, none
-    /// better), the same motions by random subjects 42.06 → 40.48 mm (9 worse, 2 better: a fragile
-    /// `axis_interaction` 8.19 → 5.80), the 74 ToF cold starts 145.27 → 149.73 mm (48 worse, 2
-    /// better), the random subjects 7–12 1.60 / 1.19 / 1.05 / 1.69 / 1.23 / 1.48 → 1.63 /
-    /// 1.19 / 1.08 / 1.73 / 1.28 / 1.54 (stride 2: 5.0 ms, 1.61 / 1.23 / 1.05 / 1.74 / 1.27 /
-    /// 1.50). A `--config` file holding `{"early_point_stride": 3}` is the real-time setting.
+    /// Default 3 (session 38; 1 before): ≥ 200 frames/s under ToF at the accuracy of every
+    /// point. Measured under ToF, 1 → 3: the frame 6.4 / 6.7 → 5.0 / 5.1 ms (`hands track`, the
+    /// library's ToF teaser, one thread, two runs each; 4 → 4.7 / 4.8 ms, 6 → 4.5 / 4.7 ms), the
+    /// library's 16 motions 21.39 → 21.43 mm (2 better, 1 worse by more than 0.05 mm), the same
+    /// motions by random subjects 42.06 → 37.16 mm (4 better, none worse), the 74 ToF cold
+    /// starts 145.27 → 145.66 mm (7 better, 7 worse), the random subjects 7–12 1.60 /
+    /// 1.19 / 1.05 / 1.69 / 1.23 / 1.48 → 1.59 / 1.18 / 1.03 / 1.67 / 1.24 / 1.45. Noise-free
+    /// data are untouched (no iteration registers along the rays there).
+    /// - The same share on every early iteration (session 37: every point whose index is a
+    ///   multiple of 3) lost accuracy — the library 22.46 mm (12 worse than every point), the
+    ///   random subjects' motions 40.48, the cold starts 149.73 (48 worse) — so it was off by
+    ///   default.
+    /// - Stride 4: the library 21.31 mm, the random subjects' motions 39.22 (one motion worse
+    ///   by more than 0.05 mm, 4 better than stride 3); stride 3 divides the default 6 early
+    ///   iterations evenly.
     pub early_point_stride: usize,
 }
 
@@ -277,7 +286,7 @@ impl Default for OnlineConfig {
             outside_gate: 3.0,
             collision_tolerance: 0.0,
             ray_last_iterations: 1,
-            early_point_stride: 1,
+            early_point_stride: 3,
         }
     }
 }
@@ -423,6 +432,10 @@ impl LmCallback<OnlineCtx> for ShapeCallback<'_> {
         self.early_last = early;
         ctx.tracking
             .set_point_stride(if early { self.early_stride } else { 1 });
+        // Each early iteration takes the next share of the points, so that over the early
+        // iterations every point pulls on the pose (a fixed share lost accuracy, docs of
+        // `OnlineConfig::early_point_stride`).
+        ctx.tracking.set_point_phase(info.iteration);
         let r = ctx.tracking.update(pose, info.rigid_only);
         self.correspondences_us += t1.elapsed().as_secs_f64() * 1e6;
         r
@@ -1031,6 +1044,7 @@ impl<'m> OnlineCalibrator<'m> {
             let lm_us = t0.elapsed().as_secs_f64() * 1e6;
             self.ctx.tracking.set_ray_gate(callback.ray_gate);
             self.ctx.tracking.set_point_stride(1);
+            self.ctx.tracking.set_point_phase(0);
             self.next = callback.next;
             let mut ok = matches!(result, Ok(r) if r.termination.was_successful())
                 && pose.values.iter().all(|v| v.is_finite());
