@@ -36,6 +36,9 @@
 //! the pose tracked so far) leaves more than a quarter of the silhouette's area covered by the
 //! model outside it, edge-on placements are tried as backups ([`DEFAULT_PLACEMENT_OUTSIDE`]). A hand first seen edge-on was
 //! otherwise placed palm-on and tracked 64–71 mm off (ToF occlusion motion from a cold start).
+//! Since session 38 every placement is solved with and without the rigid-only first iteration
+//! of Fig. 2.17, which on a fist tilted the placed open palm to fit the curled fingers
+//! (`hand_model::solver::FrameLoop`'s `place`; the 74 ToF cold starts 295.35 → 262.69 mm).
 //!
 //! The priors (joint limits, damping, temporal, PCA pose prior) are the shared terms of
 //! [`hand_model::solver::terms`], which run on [`TrackingCtx`] through

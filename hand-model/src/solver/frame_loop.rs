@@ -1,7 +1,8 @@
 //! The per-frame control flow shared by the trackers (thesis §2.4 Fig. 2.3, §3.3): warm start
 //! from the previous frame, loss detection over a window of failed frames and re-initialization
 //! from several hypotheses ([`super::loss`]), each solved a few times over
-//! ([`PLACEMENT_SOLVES`]) and looked at again a few frames later
+//! ([`PLACEMENT_SOLVES`]), with and without the rigid-only first iterations
+//! ([`TrackingProblem::set_rigid_first`]), and looked at again a few frames later
 //! ([`RECHECK_FRAMES`]), then each digit set to other flexions ([`super::digit_variants`]),
 //! which also runs, confirmed over a few frames ([`CONFIRM_FRAMES`]), on a frame that fits much
 //! worse than the recent ones ([`ScoreTrigger`]). The trackers provide the solve itself through
@@ -43,6 +44,12 @@ pub trait TrackingProblem {
     }
     /// Forget the temporal history (after a re-initialization or a frame without a hand).
     fn clear_history(&mut self);
+    /// Turn the solves' rigid-only first iterations (thesis §2.4, Fig. 2.17) off (`false`) or
+    /// back on (`true`) until the next call; whether the solves have any, so that turning them
+    /// off changes something. [`FrameLoop`] solves its placements both ways; none by default.
+    fn set_rigid_first(&mut self, _on: bool) -> bool {
+        false
+    }
     /// `pose` with digit `digit` (DESIGN.md order) set to other flexions, for the digit search
     /// at the second look at a placement and on a frame that fits much worse than the recent
     /// ones ([`super::digit_variants`]); none by default.
@@ -388,8 +395,8 @@ impl FrameLoop {
             pose: self.pose.clone(),
             backup: false,
         });
-        let starts = current.into_iter().chain(problem.hypotheses());
-        let best = self.best_start(problem, starts, |p, pose| p.solve(pose));
+        let starts: Vec<_> = current.into_iter().chain(problem.hypotheses()).collect();
+        let best = self.place(problem, starts, |p, pose| p.solve(pose));
         self.pose = best.map_or_else(|| self.fallback.clone(), |(_, p, _)| p);
         // Leave the problem at the chosen pose for the frame statistics.
         let _ = problem.refresh(&self.pose);
@@ -429,8 +436,7 @@ impl FrameLoop {
         }
         let tracked = problem.frame_stats(&self.loss);
         let starts = problem.hypotheses();
-        let (score, pose, poor) =
-            self.best_start(problem, starts, |p, pose| p.solve_aside(pose))?;
+        let (score, pose, poor) = self.place(problem, starts, |p, pose| p.solve_aside(pose))?;
         if poor || score >= tracked.score() || !problem.refresh(&pose) {
             return None;
         }
@@ -581,6 +587,45 @@ impl FrameLoop {
         Some((self.pose.clone(), stats))
     }
 
+    /// The best of `starts` solved by `solve` ([`Self::best_start`]) with the solves'
+    /// rigid-only first iterations and, where the problem has any, without them: a better of
+    /// the two placements that is not poor, or the better of two poor ones.
+    ///
+    /// Both ways, because neither wins everywhere (session 38). A rigid first iteration aligns
+    /// the placed mean pose with the data as a whole, which holds a hand seen edge-on or
+    /// turning, but on a fist it tilted the open palm to fit the curled fingers, and the joints
+    /// could not undo that (the cylinders on a ToF fist seen from the back, `axis_speed` from
+    /// frame 105: 29.90 mm mean keypoint error with it, 2.15 without). Without it alone, the
+    /// cylinders' 74 ToF cold starts went 295.35 → 317.08 mm summed (`rotation_slow` from
+    /// frame 105 11.38 → 48.35). Both ways (74 cold starts of 90 frames, mean keypoint error
+    /// summed; better / worse by more than 0.05 mm):
+    /// - ToF: cylinders 295.35 → 262.69 mm (10 / 3; cuts above 10 mm 6 → 3), sphere-mesh
+    ///   137.39 → 134.02 (7 / 0), online calibration 145.66 → 141.28 (8 / 1);
+    /// - noise-free: cylinders 302.46 → 251.09 (11 / 5; above 10 mm 7 → 5), sphere-mesh
+    ///   100.48 → 95.99 (7 / 0), online calibration 102.11 → 96.04 (11 / 0);
+    /// - the library's 16 ToF motions from frame 0 unchanged (cylinders 33.39 → 33.36,
+    ///   sphere-mesh 19.98 → 19.99; by random subjects, cylinders 98.12 → 98.11).
+    ///
+    /// A placement costs twice the solves; tracked frames cost the same.
+    fn place<P: TrackingProblem>(
+        &self,
+        problem: &mut P,
+        starts: Vec<Hypothesis>,
+        solve: impl Fn(&mut P, &mut Pose) -> bool,
+    ) -> Option<(f64, Pose, bool)> {
+        let with = self.best_start(problem, starts.clone(), &solve);
+        if !problem.set_rigid_first(false) {
+            problem.set_rigid_first(true);
+            return with;
+        }
+        let without = self.best_start(problem, starts, &solve);
+        problem.set_rigid_first(true);
+        match (with, without) {
+            (Some(a), Some(b)) => Some(if (b.2, b.0) < (a.2, a.0) { b } else { a }),
+            (a, b) => a.or(b),
+        }
+    }
+
     /// The best of `starts` solved by `solve` as (score, pose, poor placement): each start
     /// solved [`PLACEMENT_SOLVES`] times in a row; the backups once, only when the best of the
     /// others is a poor placement after its first solve or after its last, and then only one
@@ -589,7 +634,7 @@ impl FrameLoop {
         &self,
         problem: &mut P,
         starts: impl IntoIterator<Item = Hypothesis>,
-        solve: impl Fn(&mut P, &mut Pose) -> bool,
+        solve: &impl Fn(&mut P, &mut Pose) -> bool,
     ) -> Option<(f64, Pose, bool)> {
         let (backups, firsts): (Vec<_>, Vec<_>) = starts.into_iter().partition(|h| h.backup);
         let mut best: Option<(f64, Pose, bool)> = None;
@@ -657,6 +702,11 @@ mod tests {
         outside: fn(f64) -> f64,
         /// Offsets from the target of digit 0's variants (the other digits have none).
         variants: Vec<f64>,
+        /// With `Some`, the solves have rigid-only first iterations, and without them they
+        /// reach this far instead of `reach`.
+        free_reach: Option<f64>,
+        /// Whether the rigid-only first iterations are on.
+        rigid: bool,
     }
 
     impl Toy {
@@ -672,6 +722,8 @@ mod tests {
                 starts,
                 outside: |_| 0.0,
                 variants: Vec::new(),
+                free_reach: None,
+                rigid: true,
             }
         }
     }
@@ -680,7 +732,11 @@ mod tests {
         fn solve(&mut self, pose: &mut Pose) -> bool {
             self.solves += 1;
             let gap = self.target - pose.values[0];
-            if gap.abs() < self.reach {
+            let reach = match (self.rigid, self.free_reach) {
+                (false, Some(free)) => free,
+                _ => self.reach,
+            };
+            if gap.abs() < reach {
                 pose.values[0] = self.target;
             } else {
                 pose.values[0] += self.step.copysign(gap);
@@ -716,6 +772,10 @@ mod tests {
         fn clear_history(&mut self) {
             self.cleared += 1;
         }
+        fn set_rigid_first(&mut self, on: bool) -> bool {
+            self.rigid = on;
+            self.free_reach.is_some()
+        }
         fn digit_variants(&self, _pose: &Pose, digit: usize) -> Vec<Pose> {
             let offsets = if digit == 0 { &self.variants[..] } else { &[] };
             offsets
@@ -746,6 +806,24 @@ mod tests {
         assert_eq!(last.flags, ["reinitialized"]);
         assert_eq!(fl.pose.values[0], 100.0);
         assert!(toy.cleared >= 2);
+    }
+
+    /// Where the solves have rigid-only first iterations, placements are solved with and
+    /// without them and the better wins, whichever way it was found; the solves are left
+    /// with them on. Without such iterations each start is solved one way only.
+    #[test]
+    fn placements_are_solved_with_and_without_the_rigid_first_iterations() {
+        for (reach, free_reach) in [(6.0, Some(10.0)), (10.0, Some(6.0)), (10.0, None)] {
+            // From 8 off the target, only the solves that reach 10 place the hand.
+            let mut toy = Toy::new(0.0, reach, vec![(8.0, false)]);
+            toy.free_reach = free_reach;
+            let mut fl = FrameLoop::new(Pose { values: vec![0.0] }, LossParams::default());
+            let ways = if free_reach.is_some() { 2 } else { 1 };
+            assert_eq!(fl.step(&mut toy, 500).flags, ["reinitialized"]);
+            assert_eq!(fl.pose.values[0], 0.0, "{reach} {free_reach:?}");
+            assert!(toy.rigid);
+            assert_eq!(toy.solves, ways * PLACEMENT_SOLVES);
+        }
     }
 
     /// A backup start is solved only when the other starts leave a poor placement, and then

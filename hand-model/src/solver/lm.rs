@@ -415,6 +415,12 @@ impl LmSolver {
         };
     }
 
+    /// Set [`LmOptions::rigid_iterations`] for the next solves (at most
+    /// [`LmOptions::iterations`]).
+    pub fn set_rigid_iterations(&mut self, rigid: usize) {
+        self.options.rigid_iterations = rigid.min(self.options.iterations);
+    }
+
     /// Number of pose DOFs.
     pub fn num_dofs(&self) -> usize {
         self.num_dofs
