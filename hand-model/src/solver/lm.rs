@@ -1,12 +1,7 @@
 //! Levenberg–Marquardt over a pose (thesis §2.4 "Optimization", §2.7.5, Eq. 2.11).
 
-use faer::dyn_stack::{MemStack, StackReq};
-use faer::linalg::cholesky::llt::factor::{cholesky_in_place, cholesky_in_place_scratch};
-use faer::linalg::cholesky::llt::solve::{solve_in_place_scratch, solve_in_place_with_conj};
-use faer::{Conj, Mat, MatMut, MatRef, Par};
-use nalgebra::DVector;
+use nalgebra::{Cholesky, DMatrix, DVector};
 use serde::{Deserialize, Serialize};
-use std::mem::MaybeUninit;
 
 use super::normal_equations::NormalEquations;
 use super::term::{EnergyTerm, SkeletonCtx, TermError};
@@ -293,12 +288,7 @@ pub enum LmError {
 #[derive(Clone, Debug)]
 pub struct LmWorkspace {
     ne: NormalEquations,
-    /// `A + diag(λ)`, then its Cholesky factor `L` in the lower triangle. faer's blocked
-    /// factorization: at the online calibrator's 106 unknowns 14 µs against nalgebra's 42 µs
-    /// (no slower at the trackers' 28–34).
-    factor: Mat<f64>,
-    /// Scratch memory of the factorization and its triangular solves.
-    scratch: Vec<MaybeUninit<u8>>,
+    factor: DMatrix<f64>,
     diag: Vec<f64>,
     step: DVector<f64>,
     /// [`LmOptions::decouple_aux`]: `b` without the pose-only priors, then its solution.
@@ -312,8 +302,7 @@ impl LmWorkspace {
     pub fn new(dim: usize) -> Self {
         Self {
             ne: NormalEquations::new(dim),
-            factor: Mat::zeros(dim, dim),
-            scratch: vec![MaybeUninit::uninit(); scratch_bytes(dim)],
+            factor: DMatrix::zeros(dim, dim),
             diag: vec![0.0; dim],
             step: DVector::zeros(dim),
             free_rhs: DVector::zeros(dim),
@@ -344,24 +333,6 @@ impl LmWorkspace {
     }
 }
 
-/// The bytes of scratch memory that a Cholesky factorization of `dim` unknowns and its solves
-/// take (one thread).
-fn scratch_bytes(dim: usize) -> usize {
-    StackReq::any_of(&[
-        cholesky_in_place_scratch::<f64>(dim, Par::Seq, Default::default()),
-        solve_in_place_scratch::<f64>(dim, 1, Par::Seq),
-    ])
-    .unaligned_bytes_required()
-}
-
-/// Solve `L Lᵀ x = b` in place (`rhs` holds `b`, then `x`), `L` the lower triangle of `factor`.
-fn solve_factored(factor: &Mat<f64>, scratch: &mut [MaybeUninit<u8>], rhs: &mut DVector<f64>) {
-    let n = rhs.len();
-    let rhs = MatMut::from_column_major_slice_mut(rhs.as_mut_slice(), n, 1);
-    let stack = MemStack::new(scratch);
-    solve_in_place_with_conj(factor.as_ref(), Conj::No, rhs, Par::Seq, stack);
-}
-
 /// Relative pivot threshold of the Cholesky factorization: a pivot `l_jj` is accepted when
 /// `l_jj² ≥ PIVOT_TOLERANCE · A_jj` (the fraction of the diagonal left after elimination).
 const PIVOT_TOLERANCE: f64 = 1e-12;
@@ -383,7 +354,7 @@ const RECOVERY_ATTEMPTS: i32 = 10;
 ///    symmetrize once;
 /// 3. `A + diag(λ)` (per-DOF damping of [`LmOptions::damping`]); on rigid-only iterations every
 ///    row and column but the 6 global DOFs is replaced by the identity (their δ is exactly 0);
-/// 4. Cholesky (faer, in the preallocated matrix) and solve `(A + diag λ) δ = b`;
+/// 4. Cholesky (nalgebra, in the preallocated matrix) and solve `(A + diag λ) δ = b`;
 /// 5. `θ ← θ ⊞ δθ` through [`Pose::retract_in_place`] (multiplicative global rotation).
 ///
 /// # Numerical recovery
@@ -621,7 +592,9 @@ impl LmSolver {
     /// the step from `ws.free_rhs`, blended with the joint step by
     /// [`LmOptions::aux_prior_share`]; the step is kept as it is if that solution is not finite.
     fn decoupled_aux_step(&self, ws: &mut LmWorkspace) {
-        solve_factored(&ws.factor, &mut ws.scratch, &mut ws.free_rhs);
+        let chol = Cholesky::pack_dirty(std::mem::replace(&mut ws.factor, DMatrix::zeros(0, 0)));
+        chol.solve_mut(&mut ws.free_rhs);
+        ws.factor = chol.unpack_dirty();
         let n = self.num_dofs;
         let aux = &ws.free_rhs.as_slice()[n..];
         if aux.iter().all(|v| v.is_finite()) {
@@ -644,40 +617,34 @@ impl LmSolver {
                 }
                 scale * 10f64.powi(attempt - 9)
             };
-            let lhs = ws.ne.lhs();
-            ws.factor
-                .copy_from(MatRef::from_column_major_slice(lhs.as_slice(), n, n));
+            ws.factor.copy_from(ws.ne.lhs());
             ws.step.copy_from(ws.ne.rhs());
             for i in 0..n {
                 ws.factor[(i, i)] += self.damping[i] + extra;
             }
             if rigid {
-                for i in (0..n).filter(|&i| !self.global[i]) {
-                    for j in 0..n {
-                        (ws.factor[(i, j)], ws.factor[(j, i)]) = (0.0, 0.0);
+                for i in 0..n {
+                    if !self.global[i] {
+                        ws.factor.row_mut(i).fill(0.0);
+                        ws.factor.column_mut(i).fill(0.0);
+                        ws.factor[(i, i)] = 1.0;
+                        ws.step[i] = 0.0;
                     }
-                    ws.factor[(i, i)] = 1.0;
-                    ws.step[i] = 0.0;
                 }
             }
             for i in 0..n {
                 ws.diag[i] = ws.factor[(i, i)];
             }
-            let stack = MemStack::new(&mut ws.scratch);
-            let factored = cholesky_in_place(
-                ws.factor.as_mut(),
-                Default::default(),
-                Par::Seq,
-                stack,
-                Default::default(),
-            );
-            let spd = factored.is_ok()
-                && (0..n).all(|j| {
-                    let d = ws.factor[(j, j)];
-                    d.is_finite() && d > 0.0 && d * d >= PIVOT_TOLERANCE * ws.diag[j]
-                });
+            let m = std::mem::replace(&mut ws.factor, DMatrix::zeros(0, 0));
+            let l = Cholesky::new_unchecked(m).unpack_dirty();
+            let spd = (0..n).all(|j| {
+                let d = l[(j, j)];
+                d.is_finite() && d > 0.0 && d * d >= PIVOT_TOLERANCE * ws.diag[j]
+            });
             if spd {
-                solve_factored(&ws.factor, &mut ws.scratch, &mut ws.step);
+                let chol = Cholesky::pack_dirty(l);
+                chol.solve_mut(&mut ws.step);
+                ws.factor = chol.unpack_dirty();
                 if ws.step.iter().all(|v| v.is_finite()) {
                     if attempt > 0 {
                         ws.report.regularized_solves += 1;
@@ -686,6 +653,7 @@ impl LmSolver {
                 }
                 break;
             }
+            ws.factor = l;
         }
         ws.step.fill(0.0);
         false
