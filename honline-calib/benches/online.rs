@@ -336,9 +336,17 @@
 //! the points (`OnlineConfig::early_point_stride`), which tracks as accurately as every point.
 //! `hands bench --model online`, two runs each, alternating with the session's starting
 //! binary: the online frame 7 319 / 6 838 → 5 244 / 5 279 µs (≈ 0.74×; closest points 3 389 /
-//! 3 207 → 1 799 / 1 794 µs), ≈ 103 → 122 frames/s over the whole run. The machine was slower
-//! that day (the starting binary measured 6.6 ms in session 37): 0.74 × 6.6 ≈ 4.9 ms, so the
-//! goal of 200 frames/s (5 ms) is met only at the margin and not on a slow day.
+//! 3 207 → 1 799 / 1 794 µs), ≈ 103 → 122 frames/s over the whole run. At the session's end,
+//! with each placement solved with and without its rigid first iteration (twice the solves of
+//! a placement, the same per tracked frame): 6 775 / 6 823 → 5 088 / 5 105 µs (≈ 0.75×;
+//! closest points 3 197 / 3 172 → 1 709 / 1 732, along-ray 677 / 677 → 723 / 720, m2d 1 015 /
+//! 1 009 → 1 001 / 985, solve 1 385 / 1 394 → 1 170 / 1 175 µs), ≈ 108 → 116 frames/s over
+//! the whole run. The machine was slower that day (the starting binary measured 6.6 ms in
+//! session 37; 0.75 × 6.6 ≈ 4.9 ms): the goal of 200 frames/s (5 ms) is met only at the
+//! margin, and not on this day's machine. faer's Cholesky in the LM (106 unknowns: 14 against
+//! nalgebra's 42 µs, ≈ 0.2 ms a frame) was tried and reverted: its rounding flipped a fragile
+//! regression guard (`eval/tests/depth_only_tracking.rs`, rotation_fast depth-only 0.44 →
+//! 2.31 mm).
 
 #[path = "../tests/common/mod.rs"]
 mod common;

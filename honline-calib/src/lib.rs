@@ -252,9 +252,10 @@
 //!   frame only ([`OnlineConfig::ray_last_iterations`]) tracks better on every set measured and
 //!   takes the ToF frame 9.1 → 6.6 ms; the ratios 1.60 / 1.19 / 1.05 / 1.69 / 1.23 / 1.48.
 //! - Session 38: the iterations before the last register every third point, each iteration
-//!   the next third ([`OnlineConfig::early_point_stride`], default 3): the ToF frame ≈ 0.76×
-//!   (≥ 200 frames/s) at the accuracy of every point — the random subjects' library motions
-//!   track better (42.06 → 37.16 mm), the ratios 1.59 / 1.18 / 1.03 / 1.67 / 1.24 / 1.45.
+//!   the next third ([`OnlineConfig::early_point_stride`], default 3): the ToF frame ≈ 0.75×
+//!   (≈ 5 ms: 200 frames/s at the margin) at the accuracy of every point — the random
+//!   subjects' library motions track better (42.06 → 37.16 mm), the ratios 1.59 / 1.18 / 1.03
+//!   / 1.67 / 1.24 / 1.45.
 //! - The acceptance motion (`eval::online::CalibrationMotion`: each MCP a quarter period ahead
 //!   of its PIP and DIP, so that the phalanges are seen bent one at a time) leaves the PCA
 //!   pose prior's subspace, so the prior's pull, not the shape, sets most of the reference's

@@ -238,14 +238,15 @@ pub struct OnlineConfig {
     /// that over those iterations every point pulls on the pose. Those iterations only bring the
     /// pose near the data; the last one registers every point along its ray.
     ///
-    /// Default 3 (session 38; 1 before): ≥ 200 frames/s under ToF at the accuracy of every
-    /// point. Measured under ToF, 1 → 3: the frame 6.4 / 6.7 → 5.0 / 5.1 ms (`hands track`, the
-    /// library's ToF teaser, one thread, two runs each; 4 → 4.7 / 4.8 ms, 6 → 4.5 / 4.7 ms), the
-    /// library's 16 motions 21.39 → 21.43 mm (2 better, 1 worse by more than 0.05 mm), the same
-    /// motions by random subjects 42.06 → 37.16 mm (4 better, none worse), the 74 ToF cold
-    /// starts 145.27 → 145.66 mm (7 better, 7 worse), the random subjects 7–12 1.60 /
-    /// 1.19 / 1.05 / 1.69 / 1.23 / 1.48 → 1.59 / 1.18 / 1.03 / 1.67 / 1.24 / 1.45. Noise-free
-    /// data are untouched (no iteration registers along the rays there).
+    /// Default 3 (session 38; 1 before): ≈ 0.75 of the ToF frame (≈ 5 ms: 200 frames/s at the
+    /// margin) at the accuracy of every point. Measured under ToF, 1 → 3: the frame 6.4 / 6.7
+    /// → 5.0 / 5.1 ms (`hands track`, the library's ToF teaser, one thread, two runs each; 4 →
+    /// 4.7 / 4.8 ms, 6 → 4.5 / 4.7 ms), the library's 16 motions 21.39 → 21.43 mm (2 better,
+    /// 1 worse by more than 0.05 mm), the same motions by random subjects 42.06 → 37.16 mm (4
+    /// better, none worse), the 74 ToF cold starts 145.27 → 145.66 mm (7 better, 7 worse), the
+    /// issue's random subjects 7–12 1.60 / 1.19 / 1.05 / 1.69 / 1.23 / 1.48 → 1.59 / 1.18 /
+    /// 1.03 / 1.67 / 1.24 / 1.45. Noise-free data are untouched (no iteration registers along
+    /// the rays there).
     /// - The same share on every early iteration (session 37: every point whose index is a
     ///   multiple of 3) lost accuracy — the library 22.46 mm (12 worse than every point), the
     ///   random subjects' motions 40.48, the cold starts 149.73 (48 worse) — so it was off by
