@@ -604,7 +604,12 @@ impl FrameLoop {
     /// - noise-free: cylinders 302.46 → 251.09 (11 / 5; above 10 mm 7 → 5), sphere-mesh
     ///   100.48 → 95.99 (7 / 0), online calibration 102.11 → 96.04 (11 / 0);
     /// - the library's 16 ToF motions from frame 0 unchanged (cylinders 33.39 → 33.36,
-    ///   sphere-mesh 19.98 → 19.99; by random subjects, cylinders 98.12 → 98.11).
+    ///   sphere-mesh 19.98 → 19.99; by random subjects, cylinders 98.12 → 98.11);
+    /// - the 16 structured-light motions: sphere-mesh unchanged (12.37), online calibration
+    ///   13.81 → 18.40, all of it `crossing` (1.73 → 6.34): its first placement took the pose
+    ///   found without the rigid iteration (0.2 → 0.4 mm at frame 0), and 490 frames later the
+    ///   digit search that had recovered the crossed fingers did not fire — a fragile motion
+    ///   (session 34's notes), not a systematic loss.
     ///
     /// A placement costs twice the solves; tracked frames cost the same.
     fn place<P: TrackingProblem>(
