@@ -609,7 +609,7 @@ impl FrameLoop {
     ///   13.81 → 18.40, all of it `crossing` (1.73 → 6.34): its first placement took the pose
     ///   found without the rigid iteration (0.2 → 0.4 mm at frame 0), and 490 frames later the
     ///   digit search that had recovered the crossed fingers did not fire — a fragile motion
-    ///   (session 34's notes), not a systematic loss.
+    ///   (`honline_calib::OnlineConfig::collision_tolerance`'s docs), not a systematic loss.
     ///
     /// A placement costs twice the solves; tracked frames cost the same.
     fn place<P: TrackingProblem>(
