@@ -252,9 +252,6 @@ struct Problem<'m> {
     terms: Terms,
     mean_pose: Pose,
     timing: SolveTiming,
-    /// The configured [`hand_model::solver::LmOptions::rigid_iterations`], which placements
-    /// also solve without ([`TrackingProblem::set_rigid_first`]).
-    rigid_iterations: usize,
     /// [`TrackerConfig::placement_outside`].
     placement_outside: f64,
 }
@@ -276,9 +273,7 @@ impl TrackingProblem for Problem<'_> {
     }
 
     fn set_rigid_first(&mut self, on: bool) -> bool {
-        let rigid = self.rigid_iterations;
-        self.solver.set_rigid_iterations(if on { rigid } else { 0 });
-        rigid > 0
+        self.solver.set_rigid_first(on)
     }
 
     fn set_aside(&mut self, aside: bool) {
@@ -426,7 +421,6 @@ impl<'m> Tracker<'m> {
                 terms,
                 mean_pose,
                 timing: SolveTiming::default(),
-                rigid_iterations: config.lm.rigid_iterations,
                 placement_outside: config.placement_outside,
             },
             config,

@@ -373,6 +373,9 @@ const RECOVERY_ATTEMPTS: i32 = 10;
 #[derive(Clone, Debug)]
 pub struct LmSolver {
     options: LmOptions,
+    /// The [`LmOptions::rigid_iterations`] the solver was built with
+    /// ([`LmSolver::set_rigid_first`]).
+    rigid_iterations: usize,
     num_dofs: usize,
     num_aux: usize,
     damping: Vec<f64>,
@@ -396,6 +399,7 @@ impl LmSolver {
             num_aux,
             damping,
             global,
+            rigid_iterations: options.rigid_iterations,
             options,
         })
     }
@@ -415,10 +419,12 @@ impl LmSolver {
         };
     }
 
-    /// Set [`LmOptions::rigid_iterations`] for the next solves (at most
-    /// [`LmOptions::iterations`]).
-    pub fn set_rigid_iterations(&mut self, rigid: usize) {
-        self.options.rigid_iterations = rigid.min(self.options.iterations);
+    /// Turn the rigid-only first iterations of the next solves off (`false`) or back to the
+    /// count the solver was built with (`true`); whether it was built with any (the trackers'
+    /// [`super::TrackingProblem::set_rigid_first`]).
+    pub fn set_rigid_first(&mut self, on: bool) -> bool {
+        self.options.rigid_iterations = if on { self.rigid_iterations } else { 0 };
+        self.rigid_iterations > 0
     }
 
     /// Number of pose DOFs.
