@@ -43,7 +43,8 @@ pub struct TrackArgs {
     pub calibrate: Option<Estimator>,
     /// The subject's sphere-mesh template when `--model` is a method name (`spheremesh`,
     /// `cylinders`: the cylinders are fitted to it): a template `.json` or `subject:<name>`
-    /// (default: the default hand).
+    /// (`subject:random:<seed>`: the random subject of `hands synth --subject random --seed
+    /// <seed>`; default: the default hand).
     #[arg(long)]
     pub template: Option<String>,
     /// Output: `.jsonl` (one JSON object per frame, DESIGN.md "Tracker output") or `.mcap` (the
@@ -174,10 +175,20 @@ fn settings(args: &TrackArgs, method: &dyn Method) -> Result<TrackSettings> {
 }
 
 /// A sphere-mesh template: a template `.json` or `subject:<name>` (the `hands synth` subject of
-/// seed 7 applied to the default hand).
+/// seed 7 applied to the default hand; `subject:random:<seed>` the random subject that `hands
+/// synth --subject random --seed <seed>` renders).
 pub(crate) fn load_sphere_mesh(spec: &str) -> Result<SphereMeshTemplate> {
     if let Some(name) = spec.strip_prefix("subject:") {
-        let subject = datasets::subject_by_name(name, 7)?;
+        let (name, seed) = match name.split_once(':') {
+            Some((name, seed)) => (
+                name,
+                seed.parse::<u64>().with_context(|| {
+                    format!("`{spec}`: the seed after `{name}:` must be an integer")
+                })?,
+            ),
+            None => (name, 7),
+        };
+        let subject = datasets::subject_by_name(name, seed)?;
         let base = hand_model::spheremesh::default_right_hand();
         let basis = hand_model::spheremesh::ShapeBasis::honline(&base)?;
         return Ok(basis.apply(&base, &subject.beta)?);
@@ -494,4 +505,25 @@ fn write_overlay(
         .with_context(|| format!("rendering the model of frame {index}"))?;
     let image = crate::overlay::compose(frame, pixels, &distances);
     crate::overlay::write(dir, index, &image)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::load_sphere_mesh;
+
+    #[test]
+    fn a_random_subject_template_takes_the_synth_seed() {
+        let spheres = |spec: &str| load_sphere_mesh(spec).unwrap().spheres;
+        let base = hand_model::spheremesh::default_right_hand();
+        let basis = hand_model::spheremesh::ShapeBasis::honline(&base).unwrap();
+        let beta = datasets::subject_by_name("random", 50).unwrap().beta;
+        assert_eq!(
+            spheres("subject:random:50"),
+            basis.apply(&base, &beta).unwrap().spheres
+        );
+        assert_ne!(spheres("subject:random:50"), spheres("subject:random"));
+        assert_eq!(spheres("subject:random:7"), spheres("subject:random"));
+        let err = load_sphere_mesh("subject:random:x").unwrap_err();
+        assert!(format!("{err:#}").contains("must be an integer"), "{err:#}");
+    }
 }
