@@ -50,8 +50,8 @@
 //!   off (ANCHOR-FACTS §5.2): without them 4 of 74 ToF cold starts of 90 frames end above
 //!   10 mm (169.18 → 193.62 mm summed, session 35). They cost accuracy in a fist, where
 //!   pressed fingers overlap and the shape absorbs their push;
-//!   [`OnlineConfig::collision_tolerance`] (off by default) tolerates that overlap, at a price
-//!   on fast finger crossings (its docs).
+//!   [`OnlineConfig::collision_tolerance`] (2 mm by default since session 39) tolerates that
+//!   overlap (its docs).
 //! - The Laplace information comes from the data terms only (Eq. 4.5), the pose marginalized;
 //!   priors and barriers shape the mode but are not counted as measurements.
 //! - Beyond the thesis, an innovation gate ([`OnlineConfig::innovation_gate`], session 20): a

@@ -172,32 +172,48 @@ pub struct OnlineConfig {
     /// Penetration (mm) that the joint solve's collision term tolerates between two fingers
     /// beyond their rest overlap (`hmodel_spheremesh::terms::CollisionParams::tolerance`;
     /// the Ch. 3 tracker that places the hand, settles it and searches its digits keeps
-    /// [`Self::tracker`]'s). Default 0: the tracker's collisions as they are.
+    /// [`Self::tracker`]'s). Default 2 mm (session 39; 0 before: the tracker's collisions as
+    /// they are).
     ///
-    /// Why it exists: in a fist the pills of neighbouring fingers overlap more than at rest
-    /// (0.1–1.3 mm at the library's `fist`; real fingers pressed together flatten). The
-    /// collision term pushes them apart, the pose gives way, and with the shape free the data
-    /// pull the finger bases back under the fingers: on the library's noise-free `fist` cut
-    /// from frame 45, online calibration started at the true shape walked `pinky_base_x`
-    /// 27 → 17 mm and `index_middle_length` 23 → 29 mm (mean keypoint error 2.06 mm against
-    /// 0.47 for the Ch. 3 tracker; 0.52 mm at 2 mm tolerance; `tests/hard_poses.rs`).
+    /// Why: in a fist the pills of neighbouring fingers overlap more than at rest (0.1–1.3 mm
+    /// at the library's `fist`; real fingers pressed together flatten). The collision term
+    /// pushes them apart, the pose gives way, and with the shape free the data pull the finger
+    /// bases back under the fingers: on the library's noise-free `fist` cut from frame 45,
+    /// online calibration started at the true shape walked `pinky_base_x` 27 → 17 mm and
+    /// `index_middle_length` 23 → 29 mm (mean keypoint error 2.06 mm against 0.47 for the Ch. 3
+    /// tracker; 0.52 mm at 2 mm tolerance; `tests/hard_poses.rs`). On another hand's
+    /// `rotating_fist` (ToF, random subject 50) the estimate started at the subject's own shape
+    /// drifted the same way (index proximal phalanx 4–6 mm short): 5.18 mm against 2.20 for
+    /// the Ch. 3 tracker on that shape; from the default template 5.64 → 2.64 mm at 2 mm.
     ///
-    /// Why it is not the default (session 35, `hands track --calibrate online`, mean keypoint
-    /// error summed, 0 → 2 mm): cold starts of 90 frames gain (74 ToF cuts 169.18 → 161.04, 22
-    /// better and 2 worse by more than 0.05 mm; 74 noise-free cuts 113.68 → 101.21, 21 and 2),
-    /// and so do the library's noise-free motions from frame 0 (9.98 → 6.65, none worse), but a
-    /// fast finger crossing is then resolved worse: both settings lose the crossed index and
-    /// middle finger for ≈ 60 frames, and with the tolerance the fingers pass through each
-    /// other and stay exchanged for ≈ 150 frames more (`crossing` ToF 4.07 → 5.92, structured
-    /// light 1.72 → 5.56; `axis_interaction` ToF 2.50 → 8.29). The library's ToF motions sum
-    /// 23.30 → 29.29 (9 better, 2 worse), structured light 13.75 → 14.83 (8 better, 1 worse). The
-    /// crossing's outcome is fragile either way (other noise seeds: 4.81 → 6.48, 6.97 → 6.26;
-    /// `axis_interaction` 2.17 → 2.05, 4.72 → 4.79). Tolerating only nearly parallel pills lost
-    /// the fist's gain too (1.92–2.48 mm) and not the crossing (ToF 7.40 mm); a tolerance that
-    /// fades for deep penetration (`(p² − t²)/p`) kept the fist (0.52 mm) but not the
-    /// structured-light crossing (5.56 mm); refusing the shape step on
-    /// frames in contact (collision energy above 0.3 / 1 mm of penetration) refused 545 / 200
-    /// of the library's 2 626 ToF teaser frames and fixed one fist cut of two.
+    /// Measured 0 → 2 mm in session 39 (`hands track --calibrate online`, mean keypoint error
+    /// summed; better / worse by more than 0.05 mm):
+    /// - the library's 16 motions from frame 0: ToF 21.43 → 19.07 mm (10 / 0; `crossing` 3.92
+    ///   → 3.07), structured light 18.40 → 14.87 (9 / 0; `crossing` 6.34 → 5.59, `fist` 1.01 →
+    ///   0.55);
+    /// - the same motions by random subjects 41–56, ToF: 37.16 → 33.80 mm (8 / 3;
+    ///   `rotating_fist` 5.66 → 2.64, `crossing` 5.11 → 2.66, `fist` 2.56 → 1.49, but
+    ///   `axis_interaction` 3.51 → 8.34: crossed fingers lost over frames 465–485 and, unlike
+    ///   without the tolerance, not found again by the digit search, whose trigger had taken
+    ///   the lost fit as its normal — mended by `hand_model::solver::ScoreTrigger` holding such
+    ///   fits out of its window);
+    /// - 74 cold starts of 90 frames: ToF 141.28 → 135.19 mm (20 / 1), noise-free 96.04 →
+    ///   83.29 (22 / 2);
+    /// - the random subjects 7–12 (`eval/tests/ch4_acceptance.rs`, last-third keypoint
+    ///   error over the true template's): noise-free 1.07 / 1.09 / 0.83 / 1.18 / 1.06 / 1.11 →
+    ///   1.07 / 1.10 / 0.85 / 1.17 / 1.06 / 1.05, ToF 1.59 / 1.18 / 1.03 / 1.67 / 1.24 / 1.45 →
+    ///   1.60 / 1.18 / 1.03 / 1.65 / 1.23 / 1.41.
+    ///
+    /// Session 35 measured the same switch before the placements were solved both ways
+    /// (`hand_model::solver::FrameLoop`) and kept 0: the cold starts gained then too, but fast
+    /// finger crossings lost (both settings lost the crossed index and middle finger for ≈ 60
+    /// frames, and with the tolerance they passed through each other and stayed exchanged for
+    /// ≈ 150 frames more: `crossing` ToF 4.07 → 5.92, structured light 1.72 → 5.56), and
+    /// `axis_interaction` ToF 2.50 → 8.29. Tolerating only nearly parallel pills lost the
+    /// fist's gain (1.92–2.48 mm); a tolerance that fades for deep penetration (`(p² − t²)/p`)
+    /// kept the fist (0.52 mm) but not the structured-light crossing (5.56 mm); refusing the
+    /// shape step on frames in contact (collision energy above 0.3 / 1 mm of penetration)
+    /// refused 545 / 200 of the library's 2 626 ToF teaser frames and fixed one fist cut of two.
     pub collision_tolerance: f64,
     /// On how many of the last iterations of each frame's joint solve (and its evaluation after
     /// the last update) the correspondences are registered along the camera rays, on the frames
@@ -285,7 +301,7 @@ impl Default for OnlineConfig {
             noise_prior_exponent: 1.5,
             innovation_gate: 6.0,
             outside_gate: 3.0,
-            collision_tolerance: 0.0,
+            collision_tolerance: 2.0,
             ray_last_iterations: 1,
             early_point_stride: 3,
         }

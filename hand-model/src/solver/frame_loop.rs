@@ -132,9 +132,20 @@ const SCORE_RATIO: f64 = 1.3;
 /// worth, and a failure it did not mend would otherwise pay that on every frame.
 const DIGIT_COOLDOWN: usize = 30;
 
+/// Frames in a row whose scores stay out of the trigger's window while each would trigger the
+/// search ([`ScoreTrigger::push`]): a pose lost gradually fills the window with its own scores
+/// within a cooldown, after which nothing triggers the search again. Held out, a lasting bad
+/// fit keeps triggering once a cooldown — three searches — before the window takes it as the
+/// new normal (a lasting change of view that the search cannot mend). Measured (session 39,
+/// online calibration with `collision_tolerance` 2 mm, ToF `axis_interaction` by a random
+/// subject): crossed fingers lost over frames 465–485 stayed 21–33 mm off to the end without
+/// it; held, the search mended them at frame 505.
+const HOLD_FRAMES: usize = 90;
+
 /// The trigger of the digit search during tracking: the last 60 frames'
 /// scores ([`FrameStats::score`]) and the cooldown. A frame whose score exceeds 1.3 times their
-/// median (once 30 are in) triggers it, at most once in 30 frames. [`FrameLoop::step`] holds
+/// median (once 30 are in) triggers it, at most once in 30 frames; such frames join the window
+/// only after 90 in a row ([`HOLD_FRAMES`]). [`FrameLoop::step`] holds
 /// one; a tracker with a frame loop of its own (online calibration) holds its own and runs the
 /// search through [`FrameLoop::search_digits`].
 #[derive(Clone, Debug)]
@@ -143,6 +154,8 @@ pub struct ScoreTrigger {
     len: usize,
     next: usize,
     cooldown: usize,
+    /// High scores held out of the window in a row ([`HOLD_FRAMES`]).
+    held: usize,
 }
 
 impl Default for ScoreTrigger {
@@ -159,21 +172,31 @@ impl ScoreTrigger {
             len: 0,
             next: 0,
             cooldown: 0,
+            held: 0,
         }
     }
 
     /// Forget the scores (after a new placement: the frames before it fitted another pose).
     pub fn clear(&mut self) {
-        (self.len, self.next) = (0, 0);
+        (self.len, self.next, self.held) = (0, 0, 0);
     }
 
-    /// Add the score of a frame that was not lost (non-finite scores are ignored).
+    /// Add the score of a frame that was not lost (non-finite scores are ignored), unless it
+    /// would trigger the search and fewer than [`HOLD_FRAMES`] such scores have been held out
+    /// in a row.
     pub fn push(&mut self, score: f64) {
-        if score.is_finite() {
-            self.scores[self.next] = score;
-            self.next = (self.next + 1) % SCORE_WINDOW;
-            self.len = (self.len + 1).min(SCORE_WINDOW);
+        if !score.is_finite() {
+            return;
         }
+        if !self.is_high(score) {
+            self.held = 0;
+        } else if self.held < HOLD_FRAMES {
+            self.held += 1;
+            return;
+        }
+        self.scores[self.next] = score;
+        self.next = (self.next + 1) % SCORE_WINDOW;
+        self.len = (self.len + 1).min(SCORE_WINDOW);
     }
 
     /// Whether `score` triggers the digit search (which starts the cooldown); call it once a
@@ -183,17 +206,23 @@ impl ScoreTrigger {
             self.cooldown -= 1;
             return false;
         }
+        let due = self.is_high(score);
+        if due {
+            self.cooldown = DIGIT_COOLDOWN;
+        }
+        due
+    }
+
+    /// Whether `score` exceeds [`SCORE_RATIO`] times the window's median (false before half of
+    /// the window is in).
+    fn is_high(&self, score: f64) -> bool {
         if self.len < SCORE_WINDOW / 2 {
             return false;
         }
         let mut recent = self.scores;
         let recent = &mut recent[..self.len];
         let (_, median, _) = recent.select_nth_unstable_by(self.len / 2, f64::total_cmp);
-        let due = score > SCORE_RATIO * *median;
-        if due {
-            self.cooldown = DIGIT_COOLDOWN;
-        }
-        due
+        score > SCORE_RATIO * *median
     }
 }
 
@@ -1044,6 +1073,29 @@ mod tests {
         assert!(fl.step(&mut toy, 500).flags.is_empty());
         assert_eq!(toy.aside, aside + 2 * CONFIRM_FRAMES);
         assert_eq!(fl.pose.values[0], 3.0);
+    }
+
+    /// A lasting bad fit (a pose lost gradually) keeps triggering the search once a cooldown
+    /// while its scores are held out of the window, then becomes the window's normal.
+    #[test]
+    fn a_lasting_bad_fit_triggers_the_search_until_it_is_held_long_enough() {
+        let mut trigger = ScoreTrigger::new();
+        for _ in 0..SCORE_WINDOW {
+            assert!(!trigger.triggers(1.0));
+            trigger.push(1.0);
+        }
+        let fired: Vec<usize> = (0..300)
+            .filter(|_| {
+                let fired = trigger.triggers(2.0);
+                trigger.push(2.0);
+                fired
+            })
+            .collect();
+        assert_eq!(fired, [0, 31, 62, 93]);
+        // A good fit again is high against nothing and joins at once.
+        assert!(!trigger.triggers(1.0));
+        trigger.push(1.0);
+        assert_eq!(trigger.held, 0);
     }
 
     /// A candidate of the triggered digit search that fits the next frame worse than the
