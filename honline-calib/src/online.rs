@@ -186,23 +186,25 @@ pub struct OnlineConfig {
     /// drifted the same way (index proximal phalanx 4–6 mm short): 5.18 mm against 2.20 for
     /// the Ch. 3 tracker on that shape; from the default template 5.64 → 2.64 mm at 2 mm.
     ///
-    /// Measured 0 → 2 mm in session 39 (`hands track --calibrate online`, mean keypoint error
-    /// summed; better / worse by more than 0.05 mm):
-    /// - the library's 16 motions from frame 0: ToF 21.43 → 19.07 mm (10 / 0; `crossing` 3.92
-    ///   → 3.07), structured light 18.40 → 14.87 (9 / 0; `crossing` 6.34 → 5.59, `fist` 1.01 →
-    ///   0.55);
+    /// Measured in session 39 (`hands track --calibrate online`, mean keypoint error summed;
+    /// better / worse by more than 0.05 mm), 0 → 2 mm, and then with the digit search's
+    /// trigger holding a lasting bad fit out of its window (`hand_model::solver::ScoreTrigger`)
+    /// and keeping the fits from before a loss after the search mends it:
+    /// - the library's 16 motions from frame 0, ToF: 21.43 → 19.07 mm (10 / 0; `crossing` 3.92
+    ///   → 3.07) → 18.48 (10 / 0 against 0 mm; `axis_interaction` 2.36 → 1.23);
+    /// - structured light: 18.40 → 14.87 mm (9 / 0) → 12.27 (9 / 0; `crossing` 6.34 → 2.99,
+    ///   `fist` 1.01 → 0.55);
     /// - the same motions by random subjects 41–56, ToF: 37.16 → 33.80 mm (8 / 3;
     ///   `rotating_fist` 5.66 → 2.64, `crossing` 5.11 → 2.66, `fist` 2.56 → 1.49, but
-    ///   `axis_interaction` 3.51 → 8.34: crossed fingers lost over frames 465–485 and, unlike
-    ///   without the tolerance, not found again by the digit search, whose trigger had taken
-    ///   the lost fit as its normal — mended by `hand_model::solver::ScoreTrigger` holding such
-    ///   fits out of its window);
-    /// - 74 cold starts of 90 frames: ToF 141.28 → 135.19 mm (20 / 1), noise-free 96.04 →
-    ///   83.29 (22 / 2);
+    ///   `axis_interaction` 3.51 → 8.34: crossed fingers lost over frames 465–485 and not
+    ///   found again, the trigger having taken the lost fit as its normal) → 27.55 (9 / 2;
+    ///   `axis_interaction` 2.10; `pinch` 1.18 → 1.23 and `rotation_fast` 1.53 → 1.61 worse);
+    /// - 74 cold starts of 90 frames: ToF 141.28 → 135.19 mm (20 / 1) → 135.19, noise-free
+    ///   96.04 → 83.29 (22 / 2);
     /// - the random subjects 7–12 (`eval/tests/ch4_acceptance.rs`, last-third keypoint
     ///   error over the true template's): noise-free 1.07 / 1.09 / 0.83 / 1.18 / 1.06 / 1.11 →
     ///   1.07 / 1.10 / 0.85 / 1.17 / 1.06 / 1.05, ToF 1.59 / 1.18 / 1.03 / 1.67 / 1.24 / 1.45 →
-    ///   1.60 / 1.18 / 1.03 / 1.65 / 1.23 / 1.41.
+    ///   1.60 / 1.18 / 1.03 / 1.65 / 1.23 / 1.41 (both unchanged by the trigger).
     ///
     /// Session 35 measured the same switch before the placements were solved both ways
     /// (`hand_model::solver::FrameLoop`) and kept 0: the cold starts gained then too, but fast
@@ -210,10 +212,11 @@ pub struct OnlineConfig {
     /// frames, and with the tolerance they passed through each other and stayed exchanged for
     /// ≈ 150 frames more: `crossing` ToF 4.07 → 5.92, structured light 1.72 → 5.56), and
     /// `axis_interaction` ToF 2.50 → 8.29. Tolerating only nearly parallel pills lost the
-    /// fist's gain (1.92–2.48 mm); a tolerance that fades for deep penetration (`(p² − t²)/p`)
-    /// kept the fist (0.52 mm) but not the structured-light crossing (5.56 mm); refusing the
-    /// shape step on frames in contact (collision energy above 0.3 / 1 mm of penetration)
-    /// refused 545 / 200 of the library's 2 626 ToF teaser frames and fixed one fist cut of two.
+    /// fist's gain (1.92–2.48 mm); a tolerance that fades for deep penetration
+    /// (`(p² − t²)/p`) kept the fist (0.52 mm) but not the structured-light crossing (5.56 mm);
+    /// refusing the shape step on frames in contact (collision energy above 0.3 / 1 mm of
+    /// penetration) refused 545 / 200 of the library's 2 626 ToF teaser frames and fixed one
+    /// fist cut of two.
     pub collision_tolerance: f64,
     /// On how many of the last iterations of each frame's joint solve (and its evaluation after
     /// the last update) the correspondences are registered along the camera rays, on the frames
@@ -1117,9 +1120,12 @@ impl<'m> OnlineCalibrator<'m> {
                     // A new placement: the frames before fitted other fingers, and this
                     // frame's shape step was taken with them.
                     rec.flags.push("reinitialized".into());
-                    self.scores.clear();
                     self.temporal.clear_history();
-                } else if !lost {
+                }
+                if !lost {
+                    // After a mend the window keeps the fits from before the loss, whose
+                    // scores it held out while lost (`ScoreTrigger`): a second loss soon
+                    // after is caught against them, as the Ch. 3 tracker's frame loop does.
                     self.scores.push(fit.score());
                 }
                 if rejected {

@@ -136,18 +136,23 @@ const DIGIT_COOLDOWN: usize = 30;
 /// search ([`ScoreTrigger::push`]): a pose lost gradually fills the window with its own scores
 /// within a cooldown, after which nothing triggers the search again. Held out, a lasting bad
 /// fit keeps triggering once a cooldown — three searches — before the window takes it as the
-/// new normal (a lasting change of view that the search cannot mend). Measured (session 39,
-/// online calibration with `collision_tolerance` 2 mm, ToF `axis_interaction` by a random
-/// subject): crossed fingers lost over frames 465–485 stayed 21–33 mm off to the end without
-/// it; held, the search mended them at frame 505.
+/// new normal (a lasting change of view that the search cannot mend). Measured in session 39
+/// (ToF, mean keypoint error summed, better / worse by more than 0.05 mm): online calibration
+/// (with its 2 mm collision tolerance, `honline_calib::OnlineConfig::collision_tolerance`) on
+/// `axis_interaction` by a random subject — crossed fingers lost over frames 465–485 stayed
+/// 21–33 mm off to the end without the hold; held, the search mended them at frame 505 (8.34
+/// → 2.10 mm) — and on the library's 16 motions 19.07 → 18.48 mm (1 / 1: `axis_interaction`
+/// 2.10 → 1.23, `crossing` 3.07 → 3.35); the Ch. 3 tracker's library 19.99 → 17.31 mm (2 / 0:
+/// `crossing` 5.13 → 3.33, `axis_interaction` 2.08 → 1.21); the Ch. 2 cylinders' library
+/// unchanged (33.36 mm); cold starts of 90 frames, whose window seldom fills, unchanged.
 const HOLD_FRAMES: usize = 90;
 
-/// The trigger of the digit search during tracking: the last 60 frames'
-/// scores ([`FrameStats::score`]) and the cooldown. A frame whose score exceeds 1.3 times their
-/// median (once 30 are in) triggers it, at most once in 30 frames; such frames join the window
-/// only after 90 in a row ([`HOLD_FRAMES`]). [`FrameLoop::step`] holds
-/// one; a tracker with a frame loop of its own (online calibration) holds its own and runs the
-/// search through [`FrameLoop::search_digits`].
+/// The trigger of the digit search during tracking: the last 60 frames' scores
+/// ([`FrameStats::score`]) and the cooldown. A frame whose score exceeds 1.3 times their median
+/// (once 30 are in) triggers it, at most once in 30 frames; such frames join the window only
+/// after 90 in a row, so that a pose lost gradually keeps triggering it. [`FrameLoop::step`]
+/// holds one; a tracker with a frame loop of its own (online calibration) holds its own and
+/// runs the search through [`FrameLoop::search_digits`].
 #[derive(Clone, Debug)]
 pub struct ScoreTrigger {
     scores: [f64; SCORE_WINDOW],
@@ -182,8 +187,7 @@ impl ScoreTrigger {
     }
 
     /// Add the score of a frame that was not lost (non-finite scores are ignored), unless it
-    /// would trigger the search and fewer than [`HOLD_FRAMES`] such scores have been held out
-    /// in a row.
+    /// would trigger the search and fewer than 90 such scores have been held out in a row.
     pub fn push(&mut self, score: f64) {
         if !score.is_finite() {
             return;
