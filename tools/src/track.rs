@@ -180,12 +180,13 @@ fn settings(args: &TrackArgs, method: &dyn Method) -> Result<TrackSettings> {
 pub(crate) fn load_sphere_mesh(spec: &str) -> Result<SphereMeshTemplate> {
     if let Some(name) = spec.strip_prefix("subject:") {
         let (name, seed) = match name.split_once(':') {
-            Some((name, seed)) => (
-                name,
+            Some(("random", seed)) => (
+                "random",
                 seed.parse::<u64>().with_context(|| {
-                    format!("`{spec}`: the seed after `{name}:` must be an integer")
+                    format!("`{spec}`: the seed after `random:` must be an integer")
                 })?,
             ),
+            Some((name, _)) => bail!("`{spec}`: only `subject:random` takes a seed, not `{name}`"),
             None => (name, 7),
         };
         let subject = datasets::subject_by_name(name, seed)?;
@@ -525,5 +526,10 @@ mod tests {
         assert_eq!(spheres("subject:random:7"), spheres("subject:random"));
         let err = load_sphere_mesh("subject:random:x").unwrap_err();
         assert!(format!("{err:#}").contains("must be an integer"), "{err:#}");
+        let err = load_sphere_mesh("subject:default:3").unwrap_err();
+        assert!(
+            format!("{err:#}").contains("only `subject:random`"),
+            "{err:#}"
+        );
     }
 }
