@@ -1096,7 +1096,7 @@ mod tests {
             })
             .collect();
         assert_eq!(fired, [0, 31, 62, 93]);
-        // A good fit again is high against nothing and joins at once.
+        // A good fit again is not high: it resets the hold and joins the window at once.
         assert!(!trigger.triggers(1.0));
         trigger.push(1.0);
         assert_eq!(trigger.held, 0);
