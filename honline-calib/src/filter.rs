@@ -1,6 +1,7 @@
 //! The Laplace approximation of the per-frame posterior (Eq. 4.5–4.6, §4.6.1) and the
 //! cumulative estimates in information form (Eq. 4.8–4.10, Table 1; Table 2).
 
+use hand_model::solver::cholesky_checked;
 use nalgebra::{Cholesky, DMatrix, DVector, Dyn};
 use serde::{Deserialize, Serialize};
 
@@ -92,9 +93,10 @@ fn shaped(m: &mut DMatrix<f64>, rows: usize, cols: usize) -> &mut DMatrix<f64> {
 }
 
 /// Factor `m` in place (its storage becomes the factor's, given back by `Cholesky::unpack`
-/// style calls); `None`, and `m` emptied, when it is not positive definite.
+/// style calls; the factor is bit for bit nalgebra's, `hand_model::solver::factor_lower`);
+/// `None`, `m` unspecified, when it is not positive definite.
 fn cholesky_in(m: &mut DMatrix<f64>) -> Option<Cholesky<f64, Dyn>> {
-    Cholesky::new(std::mem::replace(m, DMatrix::zeros(0, 0)))
+    cholesky_checked(m).then(|| Cholesky::pack_dirty(std::mem::replace(m, DMatrix::zeros(0, 0))))
 }
 
 /// [`marginal_information`] into `out` with the buffers of `scratch` (the same arithmetic, in

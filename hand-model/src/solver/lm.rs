@@ -3,6 +3,7 @@
 use nalgebra::{Cholesky, DMatrix, DVector};
 use serde::{Deserialize, Serialize};
 
+use super::cholesky::factor_lower;
 use super::normal_equations::NormalEquations;
 use super::term::{EnergyTerm, SkeletonCtx, TermError};
 use super::terms::DampingParams;
@@ -354,7 +355,7 @@ const RECOVERY_ATTEMPTS: i32 = 10;
 ///    symmetrize once;
 /// 3. `A + diag(λ)` (per-DOF damping of [`LmOptions::damping`]); on rigid-only iterations every
 ///    row and column but the 6 global DOFs is replaced by the identity (their δ is exactly 0);
-/// 4. Cholesky (nalgebra, in the preallocated matrix) and solve `(A + diag λ) δ = b`;
+/// 4. Cholesky ([`factor_lower`], in the preallocated matrix) and solve `(A + diag λ) δ = b`;
 /// 5. `θ ← θ ⊞ δθ` through [`Pose::retract_in_place`] (multiplicative global rotation).
 ///
 /// # Numerical recovery
@@ -641,8 +642,8 @@ impl LmSolver {
             for i in 0..n {
                 ws.diag[i] = ws.factor[(i, i)];
             }
-            let m = std::mem::replace(&mut ws.factor, DMatrix::zeros(0, 0));
-            let l = Cholesky::new_unchecked(m).unpack_dirty();
+            factor_lower(&mut ws.factor);
+            let l = std::mem::replace(&mut ws.factor, DMatrix::zeros(0, 0));
             let spd = (0..n).all(|j| {
                 let d = l[(j, j)];
                 d.is_finite() && d > 0.0 && d * d >= PIVOT_TOLERANCE * ws.diag[j]

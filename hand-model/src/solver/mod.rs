@@ -67,6 +67,7 @@
 
 mod blocks;
 pub mod check;
+mod cholesky;
 mod digits;
 mod frame_loop;
 mod irls;
@@ -83,6 +84,7 @@ pub mod terms;
 mod tests;
 
 pub use blocks::{PackedBlocks, BLOCK_DOFS, MAX_BLOCKS};
+pub use cholesky::{cholesky_checked, factor_lower};
 pub use digits::{digit_variants, DIGITS, DIGIT_FLEXION_LEVELS};
 pub use frame_loop::{
     FrameLoop, FrameOutcome, Hypothesis, ScoreTrigger, TrackingProblem, CONFIRM_FRAMES,
