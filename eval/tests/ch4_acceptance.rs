@@ -50,15 +50,19 @@
 use std::collections::HashMap;
 use std::sync::{Mutex, OnceLock};
 
+use datasets::MotionLibrary;
 use eval::online::{
     last_third_error, perturbed_subject, run_default_template, run_offline, run_online,
     run_true_template, CalibrationMotion, Fig47Draw, OnlineRun,
 };
 use eval::plot::{line_plot_svg, Series};
-use eval::synthetic::SyntheticSpec;
+use eval::synthetic::{SyntheticSequence, SyntheticSpec};
+use hand_model::solver::PcaPrior;
 use hand_model::spheremesh::{default_right_hand, ShapeBasis};
-use hmodel_spheremesh::TrackerConfig;
-use honline_calib::{error_subset, Estimator, Offline, OfflineConfig, OnlineConfig};
+use hmodel_spheremesh::{Tracker, TrackerConfig};
+use honline_calib::{
+    error_subset, Estimator, Offline, OfflineConfig, OnlineCalibrator, OnlineConfig,
+};
 
 const FPS: f64 = 30.0;
 
@@ -565,6 +569,81 @@ fn estimating_every_entry_beats_the_null_space_subset() {
 fn fig_4_7_tof() {
     for sigma in [0.1, 0.2, 0.3] {
         draw_with(sigma, 0, Estimator::Iekf, 300, "tof");
+    }
+}
+
+/// Issue 8's tracking criterion on the motion library instead of the analytic calibration
+/// motion: each of `MotionLibrary::names()` but `leave_reenter` (whose last third has the
+/// hand out of view) performed by its own random subject (seed 41, 42, … in the library's
+/// order; `MOTIONS=teaser,fist` picks some) at 60 Hz, under `NOISE` (default `tof`), tracked
+/// from frame 0 with no pose given: by online calibration from the default template and by the
+/// Ch. 3 tracker on the subject's true template. Prints the last-third keypoint errors and
+/// their ratio per motion, and how many are within 10 %; asserts what session 40 measured, as
+/// a regression guard: every ratio below 3 and every online error below 4 mm. Measured under
+/// ToF: online 1.03–3.22 mm, ratios 0.30–2.28, 6 of 16 within 10 % — but 4 of those 6 are
+/// motions where the true template's tracker loses fingers for a while (`crossing` 10.88 mm,
+/// `calibration` 2.42, `fist` 1.75, `rotating_fist` 1.68); where it tracks under 1 mm the
+/// ratios are 1.13–2.28 (`teaser` 1.13, `flexion` 1.77, `rotation_slow` 2.28). ≈ 5 min on
+/// two cores: run by hand.
+#[test]
+#[ignore]
+fn library_motions_by_random_subjects() {
+    let noise = std::env::var("NOISE").unwrap_or_else(|_| "tof".into());
+    let chosen = std::env::var("MOTIONS").ok();
+    let jobs: Vec<(usize, &str)> = MotionLibrary::names()
+        .iter()
+        .copied()
+        .enumerate()
+        .filter(|&(_, m)| m != "leave_reenter")
+        .filter(|(_, m)| {
+            chosen
+                .as_ref()
+                .is_none_or(|c| c.split(',').any(|x| x == *m))
+        })
+        .collect();
+    let runs = parallel(jobs, |&(i, motion)| {
+        let seed = 41 + i as u64;
+        let frames = MotionLibrary::by_name(motion, seed)
+            .unwrap()
+            .num_frames(60.0);
+        let spec = SyntheticSpec {
+            motion: motion.into(),
+            subject: "random".into(),
+            fps: 60.0,
+            ..spec(&noise, frames, seed)
+        };
+        let (prior, base) = (PcaPrior::project_default(), default_right_hand());
+        let mut online =
+            OnlineCalibrator::new(&base, OnlineConfig::default(), Some(&prior)).unwrap();
+        let mut seq = SyntheticSequence::new(spec.clone()).unwrap();
+        let calibrated = seq
+            .run(|f, t| online.track(f, t.frame, t.timestamp).record, |_| {})
+            .unwrap();
+        let mut seq = SyntheticSequence::new(spec).unwrap();
+        let truth = seq.template().clone();
+        let mut tracker = Tracker::new(&truth, TrackerConfig::default(), Some(&prior)).unwrap();
+        let reference = seq
+            .run(|f, t| tracker.track(f, t.frame, t.timestamp), |_| {})
+            .unwrap();
+        (
+            motion,
+            last_third_error(&calibrated),
+            last_third_error(&reference),
+        )
+    });
+    for (motion, online, truth) in &runs {
+        println!(
+            "{motion:<18} online {online:.2} mm, true template {truth:.2} mm, ratio {:.2}",
+            online / truth
+        );
+    }
+    let within = runs.iter().filter(|r| r.1 <= 1.10 * r.2).count();
+    println!("{noise}: {within} of {} within 10 %", runs.len());
+    for (motion, online, truth) in &runs {
+        assert!(
+            online / truth < 3.0 && *online < 4.0,
+            "{motion}: {online:.2} / {truth:.2} mm"
+        );
     }
 }
 
