@@ -8,6 +8,9 @@
 //!   evaluation);
 //! - `assemble_5_terms_34`: the assembly alone;
 //! - `cholesky_34`: copy + factor + solve of a 34×34 SPD system (nalgebra, preallocated);
+//! - `factor_lower_34` / `factor_lower_106` against `cholesky_106`: copy + factor by the
+//!   solvers' own Cholesky (nalgebra's factor bit for bit) and by nalgebra's, at 106 unknowns
+//!   (online calibration; a synthetic SPD matrix);
 //! - `point_rows_1000x12`: 1000 data-term point rows with 12 Jacobian columns each (the cost a
 //!   tracker's data term adds per 1000 correspondences).
 //!
@@ -20,8 +23,8 @@ use hand_model::solver::terms::{
     PosePrior, PosePriorForm, PosePriorParams, Temporal, TemporalParams,
 };
 use hand_model::solver::{
-    sphere_mesh_points, EnergyTerm, LmOptions, LmSolver, NormalEquations, PcaGroup, PcaPrior,
-    RePose, SkeletonCtx,
+    factor_lower, sphere_mesh_points, EnergyTerm, LmOptions, LmSolver, NormalEquations, PcaGroup,
+    PcaPrior, RePose, SkeletonCtx,
 };
 use hand_model::spheremesh::default_right_hand;
 use nalgebra::{Cholesky, DMatrix, DVector, Vector3};
@@ -163,6 +166,30 @@ fn bench(c: &mut Criterion) {
             x[0]
         })
     });
+    // The same factor, bit for bit, by the solver's own routine; and both at the online
+    // calibrator's size (a synthetic SPD matrix of 106 unknowns).
+    let b106 = DMatrix::from_fn(106, 106, |i, j| ((i * 7 + j * 13) % 17) as f64 - 8.0);
+    let a106 = &b106 * b106.transpose() + DMatrix::identity(106, 106) * 1000.0;
+    for (name, a) in [("34", &a), ("106", &a106)] {
+        let mut m = a.clone();
+        if name == "106" {
+            c.bench_function("cholesky_106", |b| {
+                b.iter(|| {
+                    m.copy_from(a);
+                    let l = Cholesky::new_unchecked(std::mem::take(&mut m)).unpack_dirty();
+                    m = l;
+                    m[(0, 0)]
+                })
+            });
+        }
+        c.bench_function(&format!("factor_lower_{name}"), |b| {
+            b.iter(|| {
+                m.copy_from(a);
+                factor_lower(&mut m);
+                m[(0, 0)]
+            })
+        });
+    }
 
     let cols: Vec<(usize, Vector3<f64>)> = (0..12)
         .map(|k| (k * 2, Vector3::new(1.0 + k as f64, -0.5, 0.25 * k as f64)))
