@@ -16,9 +16,6 @@
 
 use nalgebra::DMatrix;
 
-/// Columns of `L` fused per pass over the target column.
-const FUSED: usize = 4;
-
 /// Overwrite the lower triangle (diagonal included) of the square `m` with its Cholesky factor
 /// `L`, bit for bit what `nalgebra::Cholesky::new_unchecked(m).unpack_dirty()` gives; the strict
 /// upper triangle is left as it was. Nothing is checked: a non-positive pivot yields NaN or
@@ -61,23 +58,22 @@ fn factor_columns(data: &mut [f64], n: usize) {
         let (left, right) = data.split_at_mut(j * n);
         let target = &mut right[j..n];
         let column = |k: usize| &left[k * n + j..k * n + n];
+        // Four columns of `L` per pass over the target.
         let mut k = 0;
-        while k + FUSED <= j {
-            let a = [-left[k * n + j], -left[(k + 1) * n + j]];
-            let b = [-left[(k + 2) * n + j], -left[(k + 3) * n + j]];
+        while k + 4 <= j {
+            let a = [0, 1, 2, 3].map(|d| -left[(k + d) * n + j]);
             let len = target.len();
-            let (x0, x1) = (&column(k)[..len], &column(k + 1)[..len]);
-            let (x2, x3) = (&column(k + 2)[..len], &column(k + 3)[..len]);
+            let x = [0, 1, 2, 3].map(|d| &column(k + d)[..len]);
             for i in 0..len {
                 // Sequential additions: the rounding of k, k + 1, k + 2, k + 3 one by one.
                 let mut y = target[i];
-                y += a[0] * x0[i];
-                y += a[1] * x1[i];
-                y += b[0] * x2[i];
-                y += b[1] * x3[i];
+                y += a[0] * x[0][i];
+                y += a[1] * x[1][i];
+                y += a[2] * x[2][i];
+                y += a[3] * x[3][i];
                 target[i] = y;
             }
-            k += FUSED;
+            k += 4;
         }
         for k in k..j {
             let a = -left[k * n + j];

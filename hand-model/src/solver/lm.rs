@@ -643,12 +643,12 @@ impl LmSolver {
                 ws.diag[i] = ws.factor[(i, i)];
             }
             factor_lower(&mut ws.factor);
-            let l = std::mem::replace(&mut ws.factor, DMatrix::zeros(0, 0));
             let spd = (0..n).all(|j| {
-                let d = l[(j, j)];
+                let d = ws.factor[(j, j)];
                 d.is_finite() && d > 0.0 && d * d >= PIVOT_TOLERANCE * ws.diag[j]
             });
             if spd {
+                let l = std::mem::replace(&mut ws.factor, DMatrix::zeros(0, 0));
                 let chol = Cholesky::pack_dirty(l);
                 chol.solve_mut(&mut ws.step);
                 ws.factor = chol.unpack_dirty();
@@ -660,7 +660,6 @@ impl LmSolver {
                 }
                 break;
             }
-            ws.factor = l;
         }
         ws.step.fill(0.0);
         false
